@@ -1,0 +1,44 @@
+# marl_vertiport: every command a user needs. `make help` lists them.
+# `make test` and `make train` set up .venv by themselves on a fresh machine.
+
+PYTHON ?= python3.11
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(VENV)/bin/pip
+STAMP  := $(VENV)/.installed
+CONFIG ?= paper
+
+.DEFAULT_GOAL := help
+.PHONY: help venv test test-fast train env-demo clean
+
+help:  ## list the targets
+	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-10s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
+
+$(PY):
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; marl_vertiport needs CPython 3.11 (pybullet 3.2.7 has a wheel for 3.11 only). Set PYTHON=/path/to/python3.11"; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install --quiet --upgrade pip
+
+# torch first, pinned to the CPU build, so nothing later pulls a CUDA build.
+$(STAMP): $(PY) pyproject.toml
+	$(PIP) install --quiet torch==2.13.0
+	$(PIP) install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+venv: $(STAMP)  ## create .venv and install the project with pinned dependencies
+
+test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward, invariants)
+	$(PY) -m pytest -q
+
+test-fast: $(STAMP)  ## the test suite without the full-episode tests
+	$(PY) -m pytest -q -m "not slow"
+
+train: $(STAMP)  ## train on the default config (CONFIG=..., RESUME=<run>)
+	@if [ -f agents/train.py ]; then $(PY) -m agents.train --config $(CONFIG) $(if $(RESUME),--resume $(RESUME)); \
+	else $(PY) -m marl_vertiport.cli demo --config $(CONFIG); fi
+
+env-demo: $(STAMP)  ## run one day of the env with random legal actions and print its metrics
+	$(PY) -m marl_vertiport.cli demo --config $(CONFIG)
+
+clean:  ## remove the virtual environment and caches
+	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -1,0 +1,434 @@
+"""Typed configuration of the vertiport simulator.
+
+YAML files in ``configs/env/`` hold the values; the frozen dataclasses below are the schema.
+Loading checks every key and type and every physical bound, and the error names the field
+(``layout.charging_ports_xy_m: ...``), so a broken file never produces a half-built env.
+
+Units are in the field names: ``_m`` metres, ``_mps`` metres per second, ``_s`` seconds,
+``_min`` schedule minutes, ``_pct`` battery percent, ``_prob`` probabilities in [0, 1].
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+#: Folder with the shipped environment configs (``paper.yaml``, ``paper_uncertain.yaml``, ...).
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "env"
+
+
+class ConfigError(ValueError):
+    """A config file or override that cannot describe a valid vertiport."""
+
+
+# --------------------------------------------------------------------------------------
+# Schema
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LayoutConfig:
+    """Where things are. Ports and hover spots form the vertiport graph, in this order:
+    normal ports, charging ports, hover spots."""
+
+    normal_ports_xy_m: tuple[tuple[float, float], ...] = ((-6.0, 0.0), (6.0, 0.0))
+    """Ground positions of the normal (non-charging) landing ports."""
+    charging_ports_xy_m: tuple[tuple[float, float], ...] = ((0.0, 8.0),)
+    """Ground positions of the charging (battery) ports; at least one."""
+    hover_spots_xy_m: tuple[tuple[float, float], ...] = ()
+    """Hover spot positions; empty means a ring of ``hover_ring_count`` spots."""
+    hover_ring_count: int = 7
+    """Number of hover spots on the ring, used when ``hover_spots_xy_m`` is empty."""
+    hover_ring_radius_m: float = 14.0
+    """Radius of the hover-spot ring around the vertiport centre."""
+    destinations_xy_m: tuple[tuple[float, float], ...] = ()
+    """Destinations outside the airspace; empty means a ring of ``destination_ring_count``."""
+    destination_ring_count: int = 5
+    """Number of destinations on the outer ring, used when ``destinations_xy_m`` is empty."""
+    destination_ring_radius_m: float = 50.0
+    """Radius of the destination ring."""
+    airspace_radius_m: float = 25.0
+    """Radius of the vertiport airspace; vehicles beyond it fly a kinematic model."""
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """Flight physics and the mapping between schedule time and flight time."""
+
+    cruise_speed_mps: float = 8.0
+    """Speed of every vehicle in flight, horizontal or vertical."""
+    flight_seconds_per_step: float = 0.25
+    """Seconds of physical flight simulated per decision step (one schedule minute)."""
+    physics_rate_hz: float = 48.0
+    """Physics update rate of the flight engine (the paper: at least 45 Hz)."""
+    hover_altitude_m: float = 4.0
+    """Altitude of hover spots and of moves between ports and hover spots."""
+    transit_altitude_m: float = 8.0
+    """Altitude of departures to and arrivals from the airspace boundary."""
+    avoid_altitudes_m: tuple[float, ...] = (12.0, 16.0)
+    """Altitude layers used by the "avoid collision" action, lowest free layer first."""
+    vehicle_size_m: float = 1.0
+    """Edge of the square footprint of a vehicle (the paper: 1 x 1 m)."""
+    vehicle_height_m: float = 0.3
+    """Height of the vehicle's collision box."""
+    vehicle_mass_kg: float = 1.0
+    """Mass of a vehicle's rigid body (scales gust forces; motion is speed-commanded)."""
+
+
+@dataclass(frozen=True)
+class ScheduleConfig:
+    """Flight plans and schedule windows, in schedule minutes."""
+
+    episode_steps: int = 1440
+    """Decision steps per episode (one day of one-minute steps); ends by truncation."""
+    minutes_per_step: float = 1.0
+    """Schedule minutes per decision step."""
+    initial_takeoff_min: tuple[int, int] = (5, 20)
+    """Range (inclusive) of the first take-off time of vehicles that start on a port."""
+    takeoff_after_landing_min: tuple[int, int] = (10, 20)
+    """Range (inclusive) of the next take-off time, counted from touchdown."""
+    landing_window_min: int = 15
+    """A vehicle re-entering the airspace is scheduled to land this many minutes later."""
+    on_time_tolerance_min: int = 5
+    """An operation is on time within this many minutes of its scheduled time."""
+
+
+@dataclass(frozen=True)
+class BatteryConfig:
+    """Battery model in percent of capacity per decision step."""
+
+    initial_pct: float = 100.0
+    """Charge of every vehicle at the start of an episode."""
+    cruise_drain_pct_per_m: float = 0.5
+    """Drain per metre flown when cruising."""
+    hover_drain_pct: float = 2.0
+    """Drain of an airborne vehicle that moved less than ``min_cruise_distance_m``."""
+    ground_idle_drain_pct: float = 4.0
+    """Drain of a vehicle idling on a normal port (or a failed charger)."""
+    charge_pct: float = 10.0
+    """Charge gained per step on a working charging port."""
+    min_cruise_distance_m: float = 1.0
+    """Below this distance in a step an airborne vehicle counts as hovering."""
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Reward terms of the paper: R = w1 tau + w2 gamma + w3 lambda + w4 beta + w5 S."""
+
+    takeoff_weight: float = 0.3
+    landing_weight: float = 0.3
+    battery_weight: float = 0.35
+    delay_weight: float = 0.1
+    safety_weight: float = 0.35
+    term_magnitude: float = 5.0
+    """Each term lies in [-term_magnitude, +term_magnitude]."""
+    battery_threshold_pct: float = 30.0
+    """Below this charge lambda is the penalty and a take-off or landing is not "good"."""
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    min_separation_m: float = 3.0
+    """Minimum separation between vehicles; the conflict threshold of the safety term."""
+
+
+@dataclass(frozen=True)
+class UncertaintyConfig:
+    """The paper's case-2 uncertainties; every draw comes from the env's seeded generator."""
+
+    wind_gust_prob: float = 0.0
+    """Chance per flying vehicle per step of a gust against its motion."""
+    gust_speed_loss_range: tuple[float, float] = (0.2, 2.0)
+    """Fraction of the step's planned displacement a gust takes away: 1 stops, 2 reverses."""
+    charger_failure_prob: float = 0.0
+    """Chance per charging port per step that it does not charge."""
+    takeoff_failure_prob: float = 0.0
+    """Chance that a take-off action fails and the vehicle stays on its port."""
+    position_noise_mean_m: float = 0.0
+    """Mean of the Gaussian error added to observed x and y of vehicles (paper draft: 1 m)."""
+    position_noise_std_m: float = 0.0
+    """Standard deviation of that error (paper draft: 1 m); 0 with mean 0 disables it."""
+    action_misread_prob: float = 0.0
+    """Chance that the commanded action is replaced by another legal one (paper draft: 0.05)."""
+
+
+@dataclass(frozen=True)
+class ATCConfig:
+    skip_agents_without_decision: bool = False
+    """False (paper): the turn of a vehicle outside the airspace is spent waiting for it.
+    True: the turn passes to the next vehicle in round-robin order that has a decision."""
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """The whole environment. ``fleet_size`` eVTOLs, the layout, and the models."""
+
+    name: str = "paper"
+    fleet_size: int = 4
+    layout: LayoutConfig = field(default_factory=LayoutConfig)
+    flight: FlightConfig = field(default_factory=FlightConfig)
+    schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
+    battery: BatteryConfig = field(default_factory=BatteryConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
+    atc: ATCConfig = field(default_factory=ATCConfig)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    def replace(self, **overrides: Any) -> EnvConfig:
+        """Return a copy with dotted-key overrides, e.g. ``{"uncertainty.wind_gust_prob": 0.1}``
+        or section dicts ``uncertainty={"wind_gust_prob": 0.1}``."""
+        data = to_dict(self)
+        for key, value in overrides.items():
+            _set_dotted(data, key.replace("__", "."), value)
+        return from_dict(data)
+
+
+# --------------------------------------------------------------------------------------
+# Validation of values
+# --------------------------------------------------------------------------------------
+
+
+def _check(cond: bool, fieldname: str, msg: str) -> None:
+    if not cond:
+        raise ConfigError(f"{fieldname}: {msg}")
+
+
+def _validate(cfg: EnvConfig) -> None:
+    lay, fl, sc, bat, rw, sf, un = (
+        cfg.layout, cfg.flight, cfg.schedule, cfg.battery, cfg.reward, cfg.safety, cfg.uncertainty
+    )
+    _check(cfg.fleet_size >= 1, "fleet_size", f"must be >= 1, got {cfg.fleet_size}")
+    _check(len(lay.charging_ports_xy_m) >= 1, "layout.charging_ports_xy_m",
+           "the vertiport needs at least one charging port")
+    n_hover = len(lay.hover_spots_xy_m) or lay.hover_ring_count
+    n_dest = len(lay.destinations_xy_m) or lay.destination_ring_count
+    _check(n_dest >= 1, "layout.destination_ring_count", "at least one destination is needed")
+    _check(n_hover >= 0, "layout.hover_ring_count", "must be >= 0")
+    n_ports = len(lay.normal_ports_xy_m) + len(lay.charging_ports_xy_m)
+    _check(n_ports + n_hover >= cfg.fleet_size, "fleet_size",
+           f"{cfg.fleet_size} vehicles do not fit on {n_ports} ports and {n_hover} hover spots")
+    _check(lay.airspace_radius_m > 0, "layout.airspace_radius_m", "must be > 0")
+    for name in ("hover_ring_radius_m", "destination_ring_radius_m"):
+        _check(getattr(lay, name) > 0, f"layout.{name}", "must be > 0")
+    for name in ("normal_ports_xy_m", "charging_ports_xy_m", "hover_spots_xy_m"):
+        for i, xy in enumerate(getattr(lay, name)):
+            _check(float(xy[0]) ** 2 + float(xy[1]) ** 2 < lay.airspace_radius_m ** 2,
+                   f"layout.{name}[{i}]", "lies outside the airspace")
+    for i, xy in enumerate(lay.destinations_xy_m):
+        _check(float(xy[0]) ** 2 + float(xy[1]) ** 2 > lay.airspace_radius_m ** 2,
+               f"layout.destinations_xy_m[{i}]", "must lie outside the airspace")
+    if not lay.hover_spots_xy_m:
+        _check(lay.hover_ring_radius_m < lay.airspace_radius_m, "layout.hover_ring_radius_m",
+               "the hover ring must lie inside the airspace")
+    if not lay.destinations_xy_m:
+        _check(lay.destination_ring_radius_m > lay.airspace_radius_m,
+               "layout.destination_ring_radius_m", "destinations must lie outside the airspace")
+
+    for name in ("cruise_speed_mps", "flight_seconds_per_step", "physics_rate_hz",
+                 "hover_altitude_m", "transit_altitude_m", "vehicle_size_m",
+                 "vehicle_height_m", "vehicle_mass_kg"):
+        _check(getattr(fl, name) > 0, f"flight.{name}", f"must be > 0, got {getattr(fl, name)}")
+    _check(len(fl.avoid_altitudes_m) >= 1, "flight.avoid_altitudes_m", "needs at least one layer")
+    for i, alt in enumerate(fl.avoid_altitudes_m):
+        _check(alt > fl.transit_altitude_m, f"flight.avoid_altitudes_m[{i}]",
+               "avoidance layers must lie above the transit altitude")
+
+    _check(sc.episode_steps >= 1, "schedule.episode_steps", "must be >= 1")
+    _check(sc.minutes_per_step > 0, "schedule.minutes_per_step", "must be > 0")
+    for name in ("initial_takeoff_min", "takeoff_after_landing_min"):
+        lo, hi = getattr(sc, name)
+        _check(0 <= lo <= hi, f"schedule.{name}", f"needs 0 <= low <= high, got {[lo, hi]}")
+    _check(sc.landing_window_min >= 0, "schedule.landing_window_min", "must be >= 0")
+    _check(sc.on_time_tolerance_min >= 0, "schedule.on_time_tolerance_min", "must be >= 0")
+
+    _check(0 <= bat.initial_pct <= 100, "battery.initial_pct", "must lie in [0, 100]")
+    for name in ("cruise_drain_pct_per_m", "hover_drain_pct", "ground_idle_drain_pct",
+                 "charge_pct", "min_cruise_distance_m"):
+        _check(getattr(bat, name) >= 0, f"battery.{name}", "must be >= 0")
+
+    for name in ("takeoff_weight", "landing_weight", "battery_weight", "delay_weight",
+                 "safety_weight", "term_magnitude"):
+        _check(getattr(rw, name) >= 0, f"reward.{name}", "must be >= 0")
+    _check(0 <= rw.battery_threshold_pct <= 100, "reward.battery_threshold_pct",
+           "must lie in [0, 100]")
+    _check(sf.min_separation_m > 0, "safety.min_separation_m", "must be > 0")
+
+    for name in ("wind_gust_prob", "charger_failure_prob", "takeoff_failure_prob",
+                 "action_misread_prob"):
+        p = getattr(un, name)
+        _check(0.0 <= p <= 1.0, f"uncertainty.{name}", f"is a probability, got {p}")
+    lo, hi = un.gust_speed_loss_range
+    _check(0 <= lo <= hi, "uncertainty.gust_speed_loss_range", f"needs 0 <= low <= high, got {[lo, hi]}")
+    _check(un.position_noise_std_m >= 0, "uncertainty.position_noise_std_m", "must be >= 0")
+
+
+# --------------------------------------------------------------------------------------
+# Generic dict <-> dataclass with type checks
+# --------------------------------------------------------------------------------------
+
+
+def _coerce(value: Any, tp: Any, where: str) -> Any:
+    origin = typing.get_origin(tp)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true/false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {value!r}")
+        return value
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, where)
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{where}: expected a list of {len(args)} values, got {value!r}")
+        return tuple(_coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+    if origin in (typing.Union, types.UnionType):
+        raise ConfigError(f"{where}: unsupported union type")  # not used by the schema
+    raise ConfigError(f"{where}: unsupported type {tp}")
+
+
+def _build(cls: type, data: Any, where: str) -> Any:
+    if isinstance(data, cls):
+        return data
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where or 'config'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        prefix = f"{where}." if where else ""
+        raise ConfigError(f"{prefix}{unknown[0]}: unknown key (known: {', '.join(sorted(names))})")
+    kwargs = {}
+    for key, value in data.items():
+        kwargs[key] = _coerce(value, hints[key], f"{where}.{key}" if where else key)
+    return cls(**kwargs)
+
+
+def from_dict(data: dict[str, Any]) -> EnvConfig:
+    """Build and validate an :class:`EnvConfig` from plain data (as loaded from YAML)."""
+    return _build(EnvConfig, data, "")
+
+
+def to_dict(cfg: Any) -> dict[str, Any]:
+    """Plain nested dict (lists for tuples) of a config, suitable for YAML."""
+
+    def conv(v: Any) -> Any:
+        if dataclasses.is_dataclass(v):
+            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
+        if isinstance(v, tuple):
+            return [conv(x) for x in v]
+        return v
+
+    return conv(cfg)
+
+
+def _set_dotted(data: dict[str, Any], key: str, value: Any) -> None:
+    parts = key.split(".")
+    node = data
+    for i, part in enumerate(parts[:-1]):
+        if part not in node or not isinstance(node[part], dict):
+            raise ConfigError(f"{'.'.join(parts[: i + 1])}: unknown config section")
+        node = node[part]
+    last = parts[-1]
+    if isinstance(value, dict) and isinstance(node.get(last), dict):
+        for sub_key, sub_value in value.items():
+            _set_dotted(node[last], sub_key, sub_value)
+    elif last not in node:
+        raise ConfigError(f"{key}: unknown key")
+    else:
+        node[last] = to_dict(value) if dataclasses.is_dataclass(value) else value
+
+
+def _merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in top.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _read_yaml(path: Path, seen: tuple[Path, ...]) -> dict[str, Any]:
+    """Read a config file; a ``base: <name or path>`` key names a file it extends."""
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping of config keys, got {type(data).__name__}")
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError(f"{path}: base: expected a config name or path, got {base!r}")
+    base_path = _resolve_path(base, relative_to=path.parent)
+    if base_path.resolve() in seen:
+        raise ConfigError(f"{path}: base: {base!r} includes itself")
+    return _merge(_read_yaml(base_path, seen + (path.resolve(),)), data)
+
+
+def _resolve_path(config: str | Path, relative_to: Path | None = None) -> Path:
+    path = Path(config)
+    candidates = [path]
+    if relative_to is not None and not path.is_absolute():
+        candidates.insert(0, relative_to / path)
+    if not path.suffix:
+        candidates.append(CONFIG_DIR / f"{config}.yaml")
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    known = ", ".join(sorted(p.stem for p in CONFIG_DIR.glob("*.yaml")))
+    raise ConfigError(f"config {str(config)!r}: no such file (shipped configs: {known})")
+
+
+def load_config(config: str | Path | EnvConfig | dict | None = None, **overrides: Any) -> EnvConfig:
+    """Resolve ``config`` into a validated :class:`EnvConfig`.
+
+    Args:
+        config: ``None`` (the paper's case 1), an :class:`EnvConfig`, a dict, a path to a YAML
+            file, or the name of a file in ``configs/env/`` (``"paper"``, ``"paper_uncertain"``).
+        **overrides: dotted keys (``uncertainty.wind_gust_prob``, or ``uncertainty__...`` as a
+            Python keyword) or whole sections as dicts, applied on top.
+    """
+    if config is None:
+        config = "paper"
+    if isinstance(config, EnvConfig):
+        cfg = config
+    elif isinstance(config, dict):
+        cfg = from_dict(config)
+    else:
+        path = _resolve_path(config)
+        data = _read_yaml(path, seen=())
+        try:
+            cfg = from_dict(data)
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from exc
+    if overrides:
+        cfg = cfg.replace(**overrides)
+    return cfg

@@ -1,0 +1,93 @@
+"""The fully centralised ATC as a single Gymnasium agent: ``"marl_vertiport/Vertiport-v0"``.
+
+Description:
+    The same simulator as :mod:`marl_vertiport.vertiport_v0`. At every step the agent acts
+    for the eVTOL whose turn it is; the observation is that eVTOL's observation in the AEC env
+    (same graphs, same ``action_mask``), and the reward is that eVTOL's reward.
+
+Action Space:
+    ``Discrete(4 + P)``, as in the AEC env.
+
+Observation Space:
+    ``Dict(observation=Dict(...), action_mask=Box(int8))``, as in the AEC env.
+
+Rewards:
+    The paper's weighted reward of the acting eVTOL.
+
+Starting State:
+    Vehicles on random ports (then hover spots) with full batteries and first flight plans.
+
+Episode End:
+    ``truncated`` after ``schedule.episode_steps`` (1440); ``terminated`` is always False.
+    The last step's ``info["episode"]`` holds the episode metrics.
+
+Arguments:
+    ``config``, ``render_mode`` and keyword overrides, as in the AEC env.
+
+Version History:
+    v0: initial release.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from marl_vertiport.config import EnvConfig, load_config
+from marl_vertiport.render import render_frame
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.physics import display_available
+from marl_vertiport.spaces import ObservationBuilder
+
+
+class VertiportEnv(gym.Env):
+    """Single-agent (fully centralised) vertiport env; see the module docstring."""
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 8}
+
+    def __init__(self, config: str | EnvConfig | dict | None = None,
+                 render_mode: str | None = None, **overrides: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not one of "
+                             f"{self.metadata['render_modes']} or None")
+        self.config = load_config(config, **overrides)
+        self.render_mode = render_mode
+        self.sim = VertiportSim(self.config, gui=render_mode == "human" and display_available())
+        self._builder = ObservationBuilder(self.sim)
+        self.observation_space = self._builder.observation_space
+        self.action_space = self._builder.action_space
+        self.state_space = self._builder.state_space
+
+    def _info(self, step_info: dict[str, Any]) -> dict[str, Any]:
+        return dict(step_info, agent=f"evtol_{self.sim.acting}")
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        self.sim.reset(self.np_random)
+        return self._builder.observe(self.sim.acting), self._info({})
+
+    def step(self, action: Any):
+        reward, info = self.sim.step(action)
+        truncated = self.sim.truncated
+        info = self._info(info)
+        if truncated:
+            info["episode"] = self.sim.episode_metrics()
+        return self._builder.observe(self.sim.acting), reward, False, truncated, info
+
+    def state(self) -> dict:
+        """Global noise-free graph, as the AEC env's ``state()``."""
+        return self._builder.state()
+
+    def action_masks(self) -> np.ndarray:
+        """Legal actions of the eVTOL whose turn it is (int8)."""
+        return self.sim.action_mask(self.sim.acting).copy()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode == "rgb_array":
+            return render_frame(self.sim)
+        return None
+
+    def close(self) -> None:
+        self.sim.close()

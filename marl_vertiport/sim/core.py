@@ -1,0 +1,786 @@
+"""The vertiport simulator: vehicles, schedules, battery, reward, safety and uncertainty.
+
+This module imports no RL or deep-learning library. The PettingZoo AEC env and the Gymnasium
+env are thin translations of :class:`VertiportSim`; both call :meth:`VertiportSim.step` with
+the action of the vehicle whose turn it is.
+
+Per decision step (one schedule minute): the acting vehicle's action is checked and applied,
+every vehicle moves for ``flight_seconds_per_step`` of flight (pybullet inside the airspace, a
+kinematic model outside it), batteries and schedules advance, and the paper's reward of the
+acting vehicle is returned.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from marl_vertiport.config import EnvConfig
+from marl_vertiport.sim.geometry import closest_approach_many, segment_distance_many, swept_min_distance
+from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
+from marl_vertiport.sim.physics import FlightPhysics
+
+# Vehicle status codes (feature ``status`` of the eVTOL graph).
+ON_PORT, ON_CHARGER, HOVERING, TAXIING, DEPARTING, AWAY, ARRIVING, OUT_OF_SERVICE = range(8)
+STATUS_NAMES = ("on_port", "on_charger", "hovering", "taxiing", "departing", "away", "arriving",
+                "out_of_service")
+_AIRBORNE = np.array([False, False, True, True, True, True, True, False])
+_IN_TRANSIT_INSIDE = np.array([False, False, False, True, True, False, True, False])
+
+# Schedule status codes (feature ``schedule_status``).
+EARLY, ON_TIME, DELAYED = -1, 0, 1
+# Pending operation of a vehicle.
+NO_OPERATION, PENDING_TAKEOFF, PENDING_LANDING = 0, 1, 2
+
+#: Columns of the eVTOL graph's node features in observations.
+EVTOL_FEATURES = ("status", "battery_pct", "schedule_status", "x_m", "y_m", "z_m",
+                  "minutes_to_schedule", "delay_min", "node", "is_self")
+#: Columns of the acting eVTOL's own feature vector (``self`` in observations).
+SELF_FEATURES = EVTOL_FEATURES[:8]
+#: Columns of the vertiport graph's node features (paper: availability, type, location).
+PORT_FEATURES = ("available", "type", "x_m", "y_m")
+#: Extra columns of the eVTOL nodes in the global state, after EVTOL_FEATURES.
+STATE_EXTRA_FEATURES = ("vx_mps", "vy_mps", "vz_mps", "destination_x_m", "destination_y_m",
+                        "avoid_layer")
+#: Extra column of the port nodes in the global state: index of the occupying/reserving vehicle.
+STATE_PORT_FEATURES = PORT_FEATURES + ("occupant",)
+#: Entries of the ``clock`` array of the global state.
+CLOCK_FEATURES = ("minute", "acting_vehicle", "steps_left")
+
+
+@dataclass
+class ActionLayout:
+    """Indices of the discrete actions, derived from the layout (paper's table I order)."""
+
+    n_nodes: int
+    n_ports: int
+    stay: int = 0
+    takeoff: int = 1
+    continue_: int = field(init=False)
+    avoid: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.continue_ = 2 + self.n_nodes
+        self.avoid = 3 + self.n_nodes
+
+    @property
+    def n(self) -> int:
+        return 4 + self.n_nodes
+
+    def node_action(self, node: int) -> int:
+        """Action that moves to / lands on vertiport node ``node``."""
+        return 2 + node
+
+    def names(self, layout: Layout) -> list[str]:
+        out = ["stay", "takeoff"]
+        for k in range(layout.n_normal):
+            out.append(f"normal_port_{k}")
+        for k in range(layout.n_charging):
+            out.append(f"charging_port_{k}")
+        for k in range(layout.n_hover):
+            out.append(f"hover_spot_{k}")
+        return out + ["continue", "avoid_collision"]
+
+
+class IllegalActionError(ValueError):
+    """An action that is out of range, of the wrong type, or masked out."""
+
+
+@dataclass
+class EpisodeMetrics:
+    """Running totals of an episode; :meth:`summary` gives the paper's metrics and ours."""
+
+    steps: int = 0
+    total_reward: float = 0.0
+    battery_sum: float = 0.0
+    good_takeoffs: int = 0
+    takeoffs: int = 0
+    failed_takeoffs: int = 0
+    good_landings: int = 0
+    landings: int = 0
+    completed_trips: int = 0
+    collisions: int = 0
+    avoided_conflicts: int = 0
+    separation_losses: int = 0
+    contacts: int = 0
+    battery_depletions: int = 0
+    action_counts: np.ndarray | None = None
+
+    def summary(self, delay_min_per_vehicle: np.ndarray) -> dict[str, Any]:
+        return {
+            "steps": self.steps,
+            "total_reward": self.total_reward,
+            "mean_battery_pct": self.battery_sum / max(self.steps, 1),
+            "good_takeoffs": self.good_takeoffs,
+            "good_landings": self.good_landings,
+            "takeoffs": self.takeoffs,
+            "failed_takeoffs": self.failed_takeoffs,
+            "landings": self.landings,
+            "mean_delay_min": float(delay_min_per_vehicle.mean()),
+            "collisions": self.collisions,
+            "avoided_conflicts": self.avoided_conflicts,
+            "separation_losses": self.separation_losses,
+            "contacts": self.contacts,
+            "battery_depletions": self.battery_depletions,
+            "completed_trips": self.completed_trips,
+            "action_counts": self.action_counts.tolist() if self.action_counts is not None else [],
+        }
+
+
+class VertiportSim:
+    """One vertiport, its fleet, and the round-robin ATC turn.
+
+    Args:
+        config: validated environment config.
+        gui: open pybullet's GUI (``render_mode="human"``).
+    """
+
+    def __init__(self, config: EnvConfig, gui: bool = False) -> None:
+        self.cfg = config
+        self.layout = Layout.from_config(config)
+        self.actions = ActionLayout(self.layout.n_nodes, self.layout.n_ports)
+        self.n = config.fleet_size
+        fl = config.flight
+        self.physics = FlightPhysics(self.n, fl.flight_seconds_per_step, fl.physics_rate_hz,
+                                     fl.vehicle_size_m, fl.vehicle_height_m, fl.vehicle_mass_kg,
+                                     gui=gui)
+        self.dt_s = fl.flight_seconds_per_step
+        self.step_len_m = fl.cruise_speed_mps * fl.flight_seconds_per_step
+        self.park_z_m = fl.vehicle_height_m / 2.0
+        n = self.n
+        self._pairs_i, self._pairs_j = np.triu_indices(n, k=1)
+        self._eye = np.eye(n, dtype=np.float32)
+        lay = self.layout
+        self._port_static = np.zeros((lay.n_nodes, 4), dtype=np.float32)
+        self._port_static[:, 1] = lay.node_type
+        self._port_static[:, 2:] = lay.node_xy_m
+        self._node_pos = np.column_stack([lay.node_xy_m, lay.node_z_m])
+        self._is_port = lay.node_type != HOVER_SPOT
+        self._charging_nodes = np.flatnonzero(lay.node_type == CHARGING_PORT)
+        un = config.uncertainty
+        self._noisy_obs = un.position_noise_std_m > 0 or un.position_noise_mean_m != 0
+        self.rng = np.random.default_rng(0)
+        self._allocate()
+
+    # ================================================================== episode state
+    def _allocate(self) -> None:
+        n, lay = self.n, self.layout
+        self.pos = np.zeros((n, 3))
+        self.prev_pos = np.zeros((n, 3))
+        self.cmd_vel = np.zeros((n, 3))
+        self.target = np.zeros((n, 3))
+        self.has_target = np.zeros(n, dtype=bool)
+        self.routes: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.status = np.zeros(n, dtype=np.int64)
+        self.battery = np.zeros(n)
+        self.node = np.full(n, -1, dtype=np.int64)
+        self.node_occupant = np.full(lay.n_nodes, -1, dtype=np.int64)
+        self.leg_alt = np.zeros(n)
+        self.avoid_layer = np.full(n, -1, dtype=np.int64)
+        self.dest = np.zeros(n, dtype=np.int64)
+        self.returning = np.zeros(n, dtype=bool)
+        self.landing_cleared = np.zeros(n, dtype=bool)
+        self.pending_kind = np.zeros(n, dtype=np.int64)
+        self.pending_time = np.zeros(n)
+        self.delay = np.zeros(n)
+        self.completed_delay = np.zeros(n)
+        self.sep_state = np.zeros(len(self._pairs_i), dtype=bool)
+        self.contact_state: set[tuple[int, int]] = set()
+        self.obs_xy = np.zeros((n, 2))
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """Start a new day: vehicles placed on random ports (then hover spots), full batteries,
+        first flight plans drawn; all from ``rng``."""
+        self.rng = rng
+        cfg, lay, n = self.cfg, self.layout, self.n
+        self._allocate()
+        self.minute = 0
+        self.step_count = 0
+        self.battery[:] = cfg.battery.initial_pct
+        ports = rng.permutation(lay.n_ports)
+        hovers = lay.n_ports + rng.permutation(lay.n_hover)
+        placement = np.concatenate([ports, hovers])[:n]
+        order = rng.permutation(n)
+        lo, hi = cfg.schedule.initial_takeoff_min
+        takeoff_offsets = rng.integers(lo, hi + 1, size=n)
+        dests = rng.integers(0, len(lay.destination_xy_m), size=n)
+        for v, node in zip(order.tolist(), placement.tolist()):
+            self._occupy(v, node)
+            self.pos[v] = self._node_pos[node]
+            self.physics.make_static(v, self.pos[v])
+            if self._is_port[node]:
+                self.status[v] = ON_CHARGER if lay.node_type[node] == CHARGING_PORT else ON_PORT
+                self.pending_kind[v] = PENDING_TAKEOFF
+                self.pending_time[v] = takeoff_offsets[v]
+            else:
+                # A vehicle that starts at a hover spot has just arrived and waits to land.
+                self.status[v] = HOVERING
+                self.pending_kind[v] = PENDING_LANDING
+                self.pending_time[v] = cfg.schedule.landing_window_min
+            self.dest[v] = dests[v]
+        self.prev_pos[:] = self.pos
+        self.metrics = EpisodeMetrics(action_counts=np.zeros(self.actions.n, dtype=np.int64))
+        self.acting = 0
+        self._choose_actor(first=True)
+        self._draw_observation_noise()
+        self._mask_cache: dict[int, np.ndarray] = {}
+        self._evtol_cache: np.ndarray | None = None
+        self.last_info: dict[str, Any] = {}
+
+    # ================================================================== bookkeeping helpers
+    def _occupy(self, v: int, node: int) -> None:
+        self.node[v] = node
+        self.node_occupant[node] = v
+
+    def _release(self, v: int) -> None:
+        node = self.node[v]
+        if node >= 0 and self.node_occupant[node] == v:
+            self.node_occupant[node] = -1
+        self.node[v] = -1
+
+    def _set_route(self, v: int, waypoints: list[np.ndarray], leg_alt_m: float) -> None:
+        self.target[v] = waypoints[0]
+        self.routes[v] = list(waypoints[1:])
+        self.has_target[v] = True
+        self.leg_alt[v] = leg_alt_m
+
+    def _local_route(self, v: int, node: int) -> list[np.ndarray]:
+        """Route at hover altitude from the vehicle to vertiport node ``node``."""
+        alt = self.cfg.flight.hover_altitude_m
+        x, y, z = self.pos[v]
+        nx, ny = self.layout.node_xy_m[node]
+        route = []
+        if abs(z - alt) > 1e-9:
+            route.append(np.array([x, y, alt]))
+        route.append(np.array([nx, ny, alt]))
+        if abs(self._node_pos[node, 2] - alt) > 1e-9:
+            route.append(self._node_pos[node].copy())
+        return route
+
+    # ================================================================== masks
+    def action_mask(self, v: int) -> np.ndarray:
+        """Legal actions of vehicle ``v`` now, int8 of shape ``(A,)``, 1 = legal; never empty."""
+        cached = self._mask_cache.get(v)
+        if cached is not None:
+            return cached
+        acts = self.actions
+        mask = np.zeros(acts.n, dtype=np.int8)
+        s = self.status[v]
+        free = self.node_occupant == -1
+        if s == ON_PORT or s == ON_CHARGER:
+            mask[acts.stay] = 1
+            mask[acts.takeoff] = 1
+            mask[2:2 + self.layout.n_ports] = free[: self.layout.n_ports]
+        elif s == HOVERING:
+            mask[acts.stay] = 1
+            mask[2:2 + self.layout.n_nodes] = free
+        elif s in (TAXIING, DEPARTING, ARRIVING):
+            mask[acts.continue_] = 1
+            mask[acts.avoid] = 1
+        elif s == AWAY:
+            mask[acts.continue_] = 1
+        else:  # out of service
+            mask[acts.stay] = 1
+        mask.setflags(write=False)
+        self._mask_cache[v] = mask
+        return mask
+
+    def has_decision(self, v: int) -> bool:
+        return self.status[v] != AWAY and self.status[v] != OUT_OF_SERVICE
+
+    def _choose_actor(self, first: bool = False) -> None:
+        if first:
+            candidate = 0
+        else:
+            candidate = (self.acting + 1) % self.n
+        if self.cfg.atc.skip_agents_without_decision:
+            for k in range(self.n):
+                v = (candidate + k) % self.n
+                if self.has_decision(v):
+                    candidate = v
+                    break
+        self.acting = candidate
+
+    # ================================================================== the step
+    def check_action(self, v: int, action: Any) -> int:
+        """Return ``action`` as an int if it is legal for vehicle ``v``, else raise."""
+        mask = self.action_mask(v)
+        legal = np.flatnonzero(mask).tolist()
+        if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
+            if isinstance(action, np.ndarray) and action.shape == () and np.issubdtype(action.dtype, np.integer):
+                action = int(action)
+            else:
+                raise IllegalActionError(
+                    f"evtol_{v}: action {action!r} has type {type(action).__name__}, expected an "
+                    f"integer in [0, {self.actions.n - 1}]; legal actions now: {legal}")
+        a = int(action)
+        if a < 0 or a >= self.actions.n:
+            raise IllegalActionError(
+                f"evtol_{v}: action {a} is out of range [0, {self.actions.n - 1}]; legal actions "
+                f"now: {legal}")
+        if not mask[a]:
+            names = self.actions.names(self.layout)
+            raise IllegalActionError(
+                f"evtol_{v}: action {a} ({names[a]}) is masked out in status "
+                f"{STATUS_NAMES[self.status[v]]}; legal actions now: "
+                f"{[f'{i} ({names[i]})' for i in legal]}")
+        return a
+
+    def step(self, action: Any) -> tuple[float, dict[str, Any]]:
+        """Apply ``action`` for the acting vehicle, advance the world one step.
+
+        Raises:
+            IllegalActionError: before any change, if the action is not legal.
+
+        Returns:
+            ``(reward of the acting vehicle, info of the step)``.
+        """
+        v = self.acting
+        a = self.check_action(v, action)
+        cfg, rng, acts = self.cfg, self.rng, self.actions
+        un, rw = cfg.uncertainty, cfg.reward
+        commanded = a
+        if un.action_misread_prob > 0 and rng.random() < un.action_misread_prob:
+            others = np.flatnonzero(self.action_mask(v))
+            others = others[others != a]
+            if others.size:
+                a = int(others[rng.integers(others.size)])
+        metrics = self.metrics
+        info: dict[str, Any] = {
+            "minute": self.minute, "acting_agent": f"evtol_{v}", "action": a,
+            "commanded_action": commanded, "takeoff": False, "good_takeoff": False,
+            "takeoff_failed": False, "landing": False, "good_landing": False,
+        }
+        mag = rw.term_magnitude
+
+        # ---- safety term, from the state before anything moves (paper eqs. 3-5)
+        safety = 0.0
+        if _IN_TRANSIT_INSIDE[self.status[v]] and self._predicted_conflict(v):
+            safety = mag if a == acts.avoid else -mag
+        info["conflict"] = safety != 0.0
+
+        # ---- apply the action
+        tau = gamma = 0.0
+        tol = cfg.schedule.on_time_tolerance_min
+        now = self.minute
+        if a == acts.takeoff:
+            if un.takeoff_failure_prob > 0 and rng.random() < un.takeoff_failure_prob:
+                info["takeoff_failed"] = True
+                metrics.failed_takeoffs += 1
+            else:
+                good = abs(now - self.pending_time[v]) <= tol and self.battery[v] > rw.battery_threshold_pct
+                tau = mag if good else -mag
+                info["takeoff"], info["good_takeoff"] = True, bool(good)
+                metrics.takeoffs += 1
+                metrics.good_takeoffs += int(good)
+                self._complete_operation(v, now)
+                self._start_departure(v)
+        elif 2 <= a < 2 + self.layout.n_nodes:
+            node = a - 2
+            landing = self.status[v] == HOVERING and self._is_port[node]
+            if landing:
+                good = now <= self.pending_time[v] + tol and self.battery[v] > rw.battery_threshold_pct
+                gamma = mag if good else -mag
+                info["landing"], info["good_landing"] = True, bool(good)
+                metrics.landings += 1
+                metrics.good_landings += int(good)
+                self._complete_operation(v, now)
+                self.landing_cleared[v] = True
+            route = self._local_route(v, node)
+            self._release(v)
+            self._occupy(v, node)
+            self.status[v] = TAXIING
+            self._set_route(v, route, self.cfg.flight.hover_altitude_m)
+            self.physics.make_dynamic(v)
+        elif a == acts.avoid:
+            self._avoid(v)
+        # stay / continue: nothing changes.
+
+        # ---- advance the world one step
+        status_during = self.status.copy()
+        self.prev_pos[:] = self.pos
+        gusts = self._move()
+        info["gusts"] = gusts
+        info["separation_losses"], info["contacts"] = self._measure_separation()
+        info["touchdowns"] = self._process_arrivals()
+        holding = np.flatnonzero((self.status == ARRIVING) & ~self.has_target)
+        for h in holding.tolist():
+            self._assign_hover_spot(h)
+        charger_failed = np.zeros(len(self._charging_nodes), dtype=bool)
+        if un.charger_failure_prob > 0:
+            charger_failed = rng.random(len(self._charging_nodes)) < un.charger_failure_prob
+        info["charger_failures"] = int(charger_failed.sum())
+        info["battery_depletions"] = self._update_battery(status_during, charger_failed)
+        self.minute += 1
+        self.step_count += 1
+        self._update_delays()
+
+        # ---- reward of the acting vehicle (paper's eq. 2)
+        lam = mag * self.battery[v] / 100.0 if self.battery[v] >= rw.battery_threshold_pct else -mag
+        beta = -mag + 2.0 * mag * float(np.exp(-self.delay[v]))
+        reward = (rw.takeoff_weight * tau + rw.landing_weight * gamma + rw.battery_weight * lam
+                  + rw.delay_weight * beta + rw.safety_weight * safety)
+        info["reward_terms"] = {"takeoff": tau, "landing": gamma, "battery": lam, "delay": beta,
+                                "safety": safety}
+        metrics.steps += 1
+        metrics.total_reward += reward
+        metrics.battery_sum += float(self.battery.mean())
+        metrics.collisions += int(safety < 0)
+        metrics.avoided_conflicts += int(safety > 0)
+        metrics.action_counts[a] += 1
+
+        self._mask_cache = {}
+        self._evtol_cache = None
+        self._choose_actor()
+        self._draw_observation_noise()
+        self.last_info = info
+        return float(reward), info
+
+    @property
+    def truncated(self) -> bool:
+        return self.step_count >= self.cfg.schedule.episode_steps
+
+    def episode_metrics(self) -> dict[str, Any]:
+        return self.metrics.summary(self.completed_delay + self.delay)
+
+    # ================================================================== action effects
+    def _complete_operation(self, v: int, now: float) -> None:
+        late = now - self.pending_time[v]
+        if late > self.cfg.schedule.on_time_tolerance_min:
+            self.completed_delay[v] += late
+        self.pending_kind[v] = NO_OPERATION
+        self.delay[v] = 0.0
+
+    def _start_departure(self, v: int) -> None:
+        alt = self.cfg.flight.transit_altitude_m
+        x, y, _ = self.pos[v]
+        dest_xy = self.layout.destination_xy_m[self.dest[v]]
+        exit_xy = self.layout.boundary_point(self.pos[v, :2], dest_xy)
+        self._release(v)
+        self.status[v] = DEPARTING
+        self._set_route(v, [np.array([x, y, alt]), np.array([exit_xy[0], exit_xy[1], alt])], alt)
+        self.physics.make_dynamic(v)
+
+    def _avoid(self, v: int) -> None:
+        """Climb to the lowest avoidance layer no other vehicle uses, and fly the rest of the
+        leg there; hold position if every layer is taken."""
+        if self.avoid_layer[v] >= 0 or not self.has_target[v]:
+            return
+        used = set(self.avoid_layer[self.avoid_layer >= 0].tolist())
+        layers = self.cfg.flight.avoid_altitudes_m
+        free = [k for k in range(len(layers)) if k not in used]
+        if not free:
+            # No free layer: hover in place this step (the route resumes next step).
+            self.routes[v].insert(0, self.target[v].copy())
+            self.target[v] = self.pos[v]
+            return
+        k = free[0]
+        alt = layers[k]
+        self.avoid_layer[v] = k
+        waypoints = [self.target[v]] + self.routes[v]
+        final = waypoints[-1]
+        horizontal = [w for w in waypoints if np.hypot(*(w[:2] - self.pos[v, :2])) > 1e-9]
+        new_route = [np.array([self.pos[v, 0], self.pos[v, 1], alt])]
+        for w in horizontal:
+            new_route.append(np.array([w[0], w[1], alt]))
+        if abs(final[2] - alt) > 1e-9 and self.status[v] != DEPARTING:
+            if not horizontal:
+                new_route.append(np.array([final[0], final[1], alt]))
+            new_route.append(final.copy())
+        # Drop duplicates created by the rewrite (consecutive equal waypoints).
+        route = [new_route[0]]
+        for w in new_route[1:]:
+            if np.any(np.abs(w - route[-1]) > 1e-9):
+                route.append(w)
+        self._set_route(v, route, alt)
+
+    # ================================================================== safety
+    def _predicted_conflict(self, v: int) -> bool:
+        """Paper's conflict check for the acting vehicle: another in-transit vehicle whose
+        planned 2-D path comes within the separation distance of ours (our reading of
+        "intersecting paths" for vehicles with a footprint), in the same altitude layer, and
+        whose closest approach lies ahead (t_min >= 0) and within the separation distance."""
+        others = np.flatnonzero(_IN_TRANSIT_INSIDE[self.status] & self.has_target)
+        others = others[others != v]
+        if others.size == 0 or not self.has_target[v]:
+            return False
+        sep = self.cfg.safety.min_separation_m
+        others = others[np.abs(self.leg_alt[others] - self.leg_alt[v]) < sep]
+        if others.size == 0:
+            return False
+        ends = np.stack([self._leg_end_xy(o) for o in others.tolist()])
+        seg = segment_distance_many(self.pos[v, :2], self._leg_end_xy(v), self.pos[others, :2], ends)
+        others = others[seg < sep]
+        if others.size == 0:
+            return False
+        vel = self._planned_velocity_xy(np.append(others, v))
+        t_min, d_min = closest_approach_many(self.pos[v, :2], vel[-1], self.pos[others, :2], vel[:-1])
+        return bool(np.any((t_min >= 0.0) & (d_min <= sep)))
+
+    def _leg_end_xy(self, v: int) -> np.ndarray:
+        """Horizontal end of the vehicle's path inside the airspace."""
+        return (self.routes[v][-1] if self.routes[v] else self.target[v])[:2]
+
+    def _planned_velocity_xy(self, idx: np.ndarray) -> np.ndarray:
+        """Horizontal velocity the controller commands toward the current waypoint, ``(K, 2)``."""
+        delta = self.target[idx, :2] - self.pos[idx, :2]
+        dist = np.linalg.norm(delta, axis=1)
+        speed = self.cfg.flight.cruise_speed_mps
+        safe = np.where(dist > 1e-9, dist, 1.0)
+        # A vehicle climbing or descending (no horizontal offset) has no horizontal velocity.
+        return np.where(dist[:, None] > 1e-9, delta / safe[:, None] * speed, 0.0)
+
+    # ================================================================== motion
+    def _move(self) -> int:
+        """Move every vehicle with a target for one step; returns the number of gusts."""
+        idx = np.flatnonzero(self.has_target)
+        self.cmd_vel[:] = 0.0
+        if idx.size == 0:
+            return 0
+        delta = self.target[idx] - self.pos[idx]
+        dist = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+        travel = np.minimum(dist, self.step_len_m)
+        vel = delta * (travel / np.where(dist > 0, dist, 1.0) / self.dt_s)[:, None]
+        self.cmd_vel[idx] = vel
+        un = self.cfg.uncertainty
+        loss = None
+        n_gusts = 0
+        if un.wind_gust_prob > 0:
+            lo, hi = un.gust_speed_loss_range
+            hit = self.rng.random(idx.size) < un.wind_gust_prob
+            loss = np.where(hit, self.rng.uniform(lo, hi, idx.size), 0.0)
+            n_gusts = int(hit.sum())
+        away = self.status[idx] == AWAY
+        if away.any():
+            k = np.flatnonzero(away)
+            factor = self.dt_s if loss is None else self.dt_s * (1.0 - loss[k])[:, None]
+            self.pos[idx[k]] += vel[k] * factor
+        inside = ~away
+        if inside.any():
+            k = np.flatnonzero(inside)
+            force = None
+            if loss is not None and loss[k].any():
+                force = self.physics.gust_force(vel[k], loss[k])
+            self.physics.step(idx[k], vel[k], force, self.pos)
+        return n_gusts
+
+    def _process_arrivals(self) -> int:
+        """Advance routes of vehicles that reached their waypoint; returns touchdowns."""
+        idx = np.flatnonzero(self.has_target)
+        if idx.size == 0:
+            return 0
+        gap = np.abs(self.target[idx] - self.pos[idx]).max(axis=1)
+        touchdowns = 0
+        for v in idx[gap < 1e-6].tolist():
+            if self.routes[v]:
+                self.target[v] = self.routes[v].pop(0)
+                continue
+            self.has_target[v] = False
+            touchdowns += self._finish_leg(v)
+        return touchdowns
+
+    def _finish_leg(self, v: int) -> int:
+        s = self.status[v]
+        lay, cfg = self.layout, self.cfg
+        self.avoid_layer[v] = -1
+        if s == TAXIING or s == ARRIVING:
+            node = self.node[v]
+            self.pos[v] = self._node_pos[node]
+            self.physics.make_static(v, self.pos[v])
+            if lay.node_type[node] == HOVER_SPOT:
+                self.status[v] = HOVERING
+                return 0
+            self.status[v] = ON_CHARGER if lay.node_type[node] == CHARGING_PORT else ON_PORT
+            if self.landing_cleared[v]:
+                self.landing_cleared[v] = False
+                lo, hi = cfg.schedule.takeoff_after_landing_min
+                self.pending_kind[v] = PENDING_TAKEOFF
+                self.pending_time[v] = self.minute + 1 + int(self.rng.integers(lo, hi + 1))
+                self.dest[v] = int(self.rng.integers(len(lay.destination_xy_m)))
+                self.metrics.completed_trips += 1
+                return 1
+            return 0
+        if s == DEPARTING:
+            self.status[v] = AWAY
+            self.returning[v] = False
+            self.physics.make_absent(v)
+            d = lay.destination_xy_m[self.dest[v]]
+            self._set_route(v, [np.array([d[0], d[1], self.pos[v, 2]])], self.pos[v, 2])
+            return 0
+        if s == AWAY and not self.returning[v]:
+            self.returning[v] = True
+            entry = lay.boundary_point(np.zeros(2), self.pos[v, :2])
+            # Aim slightly inside the boundary so the re-entry is unambiguous.
+            entry = entry * (1.0 - 1e-3)
+            alt = cfg.flight.transit_altitude_m
+            self._set_route(v, [np.array([entry[0], entry[1], alt])], alt)
+            return 0
+        if s == AWAY:
+            self.status[v] = ARRIVING
+            self.returning[v] = False
+            self.pending_kind[v] = PENDING_LANDING
+            self.pending_time[v] = self.minute + 1 + cfg.schedule.landing_window_min
+            self.physics.make_static(v, self.pos[v])
+            self._assign_hover_spot(v)
+            return 0
+        return 0
+
+    def _assign_hover_spot(self, v: int) -> None:
+        """Send an arriving vehicle to the free hover spot nearest to it, or hold it."""
+        lay = self.layout
+        free = np.flatnonzero((lay.node_type == HOVER_SPOT) & (self.node_occupant == -1))
+        if free.size == 0:
+            return  # holds at the boundary until a spot frees up
+        d = np.linalg.norm(lay.node_xy_m[free] - self.pos[v, :2], axis=1)
+        node = int(free[np.argmin(d)])
+        self._occupy(v, node)
+        alt = self.cfg.flight.transit_altitude_m
+        nx, ny = lay.node_xy_m[node]
+        self._set_route(v, [np.array([nx, ny, alt]), self._node_pos[node].copy()], alt)
+        self.physics.make_dynamic(v)
+
+    # ================================================================== measurement
+    def _measure_separation(self) -> tuple[int, int]:
+        """New losses of separation (swept over the step) and new engine contacts."""
+        if self.n < 2:
+            return 0, 0
+        present = self.status != AWAY
+        airborne = _AIRBORNE[self.status] & present
+        pi, pj = self._pairs_i, self._pairs_j
+        relevant = present[pi] & present[pj] & (airborne[pi] | airborne[pj])
+        losses = np.zeros_like(self.sep_state)
+        if relevant.any():
+            k = np.flatnonzero(relevant)
+            dmin = swept_min_distance(self.prev_pos, self.pos, pi[k], pj[k])
+            losses[k] = dmin < self.cfg.safety.min_separation_m
+        new_losses = int((losses & ~self.sep_state).sum())
+        self.sep_state = losses
+        self.metrics.separation_losses += new_losses
+        new_contacts = 0
+        if self.physics.any_dynamic:
+            pairs = set(self.physics.contact_pairs())
+            new_contacts = len(pairs - self.contact_state)
+            self.contact_state = pairs
+        else:
+            self.contact_state = set()
+        self.metrics.contacts += new_contacts
+        return new_losses, new_contacts
+
+    def _update_battery(self, status_during: np.ndarray, charger_failed: np.ndarray) -> int:
+        bat = self.cfg.battery
+        moved = np.sqrt(np.einsum("ij,ij->i", self.pos - self.prev_pos, self.pos - self.prev_pos))
+        airborne = _AIRBORNE[status_during]
+        drain = np.where(moved >= bat.min_cruise_distance_m, bat.cruise_drain_pct_per_m * moved,
+                         bat.hover_drain_pct)
+        change = np.where(airborne, -drain, 0.0)
+        change[status_during == ON_PORT] = -bat.ground_idle_drain_pct
+        charging = np.flatnonzero(status_during == ON_CHARGER)
+        if charging.size:
+            # A charger that fails this step leaves its vehicle idling on the ground.
+            failed = np.isin(self.node[charging], self._charging_nodes[charger_failed])
+            change[charging] = np.where(failed, -bat.ground_idle_drain_pct, bat.charge_pct)
+        self.battery = np.clip(self.battery + change, 0.0, 100.0)
+        depleted = np.flatnonzero(airborne & (self.battery <= 0.0) & (self.status != OUT_OF_SERVICE))
+        for v in depleted.tolist():
+            self._take_out_of_service(v)
+        self.metrics.battery_depletions += depleted.size
+        return int(depleted.size)
+
+    def _take_out_of_service(self, v: int) -> None:
+        """Battery depleted in the air: emergency landing where it is, out of service for the
+        rest of the day. It keeps a port it is sitting over, so nothing lands on it."""
+        self.has_target[v] = False
+        self.routes[v] = []
+        self.avoid_layer[v] = -1
+        self.landing_cleared[v] = False
+        self.pending_kind[v] = NO_OPERATION
+        self._release(v)
+        inside = self.status[v] != AWAY
+        self.status[v] = OUT_OF_SERVICE
+        if inside:
+            self.pos[v, 2] = self.park_z_m
+            d = np.linalg.norm(self.layout.node_xy_m - self.pos[v, :2], axis=1)
+            near = np.flatnonzero((d < self.cfg.flight.vehicle_size_m * 2) & self._is_port
+                                  & (self.node_occupant == -1))
+            if near.size:
+                self._occupy(v, int(near[0]))
+            self.physics.make_static(v, self.pos[v])
+
+    def _update_delays(self) -> None:
+        tol = self.cfg.schedule.on_time_tolerance_min
+        late = self.minute - self.pending_time
+        self.delay = np.where((self.pending_kind != NO_OPERATION) & (late > tol), late, 0.0)
+
+    def _draw_observation_noise(self) -> None:
+        if self._noisy_obs:
+            un = self.cfg.uncertainty
+            self.obs_xy = self.pos[:, :2] + self.rng.normal(
+                un.position_noise_mean_m, un.position_noise_std_m, size=(self.n, 2))
+        else:
+            self.obs_xy = self.pos[:, :2]
+
+    # ================================================================== graph features
+    def schedule_status(self) -> np.ndarray:
+        """-1 early, 0 on time, 1 delayed, per vehicle, shape ``(N,)``."""
+        tol = self.cfg.schedule.on_time_tolerance_min
+        rel = self.minute - self.pending_time
+        out = np.zeros(self.n, dtype=np.int64)
+        takeoff = self.pending_kind == PENDING_TAKEOFF
+        landing = self.pending_kind == PENDING_LANDING
+        out[takeoff & (rel < -tol)] = EARLY
+        out[(takeoff | landing) & (rel > tol)] = DELAYED
+        return out
+
+    def _evtol_base(self) -> np.ndarray:
+        if self._evtol_cache is None:
+            f = np.empty((self.n, len(EVTOL_FEATURES)), dtype=np.float32)
+            f[:, 0] = self.status
+            f[:, 1] = self.battery
+            f[:, 2] = self.schedule_status()
+            f[:, 3:5] = self.obs_xy
+            f[:, 5] = self.pos[:, 2]
+            f[:, 6] = np.where(self.pending_kind != NO_OPERATION, self.pending_time - self.minute, 0.0)
+            f[:, 7] = self.delay
+            f[:, 8] = self.node
+            f[:, 9] = 0.0
+            self._evtol_cache = f
+        return self._evtol_cache
+
+    def port_nodes(self) -> np.ndarray:
+        """Vertiport graph node features ``(P, 4)``: available, type, x_m, y_m."""
+        f = self._port_static.copy()
+        f[:, 0] = self.node_occupant == -1
+        return f
+
+    def evtol_nodes(self, observer: int) -> np.ndarray:
+        """eVTOL graph node features ``(N, 10)`` as seen by vehicle ``observer``."""
+        f = self._evtol_base().copy()
+        f[observer, 9] = 1.0
+        return f
+
+    def self_features(self, v: int) -> np.ndarray:
+        return self._evtol_base()[v, :8].copy()
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Global, noise-free graph for a centralised critic."""
+        base = self._evtol_base()
+        evtol = np.empty((self.n, len(EVTOL_FEATURES) + len(STATE_EXTRA_FEATURES)), dtype=np.float32)
+        evtol[:, : len(EVTOL_FEATURES)] = base
+        evtol[:, 3:5] = self.pos[:, :2]
+        evtol[:, 9] = 0.0
+        evtol[self.acting, 9] = 1.0
+        k = len(EVTOL_FEATURES)
+        evtol[:, k:k + 3] = self.cmd_vel
+        evtol[:, k + 3:k + 5] = self.layout.destination_xy_m[self.dest]
+        evtol[:, k + 5] = self.avoid_layer
+        ports = np.empty((self.layout.n_nodes, len(STATE_PORT_FEATURES)), dtype=np.float32)
+        ports[:, :4] = self.port_nodes()
+        ports[:, 4] = self.node_occupant
+        clock = np.array([self.minute, self.acting,
+                          self.cfg.schedule.episode_steps - self.step_count], dtype=np.float32)
+        return {"port_nodes": ports, "evtol_nodes": evtol, "clock": clock}
+
+    def close(self) -> None:
+        self.physics.close()

@@ -1,0 +1,257 @@
+"""Rigid-body flight physics of the vehicles inside the vertiport airspace, in pybullet.
+
+One DIRECT client per env (``physicsClientId`` on every call). Each vehicle is a box-shaped
+rigid body. The flight controller is speed-commanded: at the start of every decision step the
+commanded velocity is set on the bodies that move; gravity is taken as cancelled by thrust.
+Gusts are external forces held over the step. One ``stepSimulation`` call advances the
+``flight_seconds_per_step`` of a step in ``ceil(flight_seconds_per_step * physics_rate_hz)``
+engine substeps, so the engine updates every body at ``>= physics_rate_hz``.
+
+Cost in proportion: a vehicle that is parked or hovering is a static body (mass 0, nothing to
+integrate); a vehicle outside the airspace has its collisions switched off and is moved by the
+core's kinematic model, not by the engine; when no body moves the engine is not stepped.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+
+import numpy as np
+import pybullet as p
+
+#: Body colours (RGBA) used for rendering, cycled over the fleet.
+VEHICLE_COLOURS = (
+    (0.90, 0.30, 0.20, 1), (0.20, 0.50, 0.90, 1), (0.95, 0.75, 0.10, 1), (0.55, 0.30, 0.80, 1),
+    (0.10, 0.70, 0.60, 1), (0.95, 0.45, 0.70, 1), (0.45, 0.45, 0.45, 1), (0.60, 0.80, 0.20, 1),
+)
+
+_PARKED_FAR_Z_M = -50.0  # where bodies of vehicles outside the airspace wait (below ground)
+
+
+class FlightPhysics:
+    """The pybullet world of one env.
+
+    Args:
+        n_vehicles: number of vehicle bodies.
+        flight_seconds_per_step: physical seconds simulated per :meth:`step`.
+        physics_rate_hz: minimum engine update rate.
+        vehicle_size_m, vehicle_height_m, vehicle_mass_kg: body geometry and mass.
+        gui: open pybullet's GUI instead of a headless DIRECT client.
+    """
+
+    def __init__(
+        self,
+        n_vehicles: int,
+        flight_seconds_per_step: float,
+        physics_rate_hz: float,
+        vehicle_size_m: float,
+        vehicle_height_m: float,
+        vehicle_mass_kg: float,
+        gui: bool = False,
+    ) -> None:
+        self.dt_s = float(flight_seconds_per_step)
+        self.substeps = max(1, math.ceil(self.dt_s * physics_rate_hz - 1e-9))
+        self.mass_kg = float(vehicle_mass_kg)
+        s, h = vehicle_size_m, vehicle_height_m
+        self._inertia = [self.mass_kg / 12 * (s * s + h * h)] * 2 + [self.mass_kg / 12 * 2 * s * s]
+        self.client = p.connect(p.GUI if gui else p.DIRECT)
+        if self.client < 0:
+            raise RuntimeError("pybullet could not open a physics client")
+        cid = self.client
+        p.setGravity(0.0, 0.0, 0.0, physicsClientId=cid)
+        p.setPhysicsEngineParameter(
+            fixedTimeStep=self.dt_s, numSubSteps=self.substeps, physicsClientId=cid
+        )
+        half = [vehicle_size_m / 2.0, vehicle_size_m / 2.0, vehicle_height_m / 2.0]
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
+        self._visual_shapes: list[int] = []
+        self.bodies: list[int] = []
+        for i in range(n_vehicles):
+            visual = p.createVisualShape(
+                p.GEOM_BOX, halfExtents=half, rgbaColor=VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)],
+                physicsClientId=cid,
+            )
+            body = p.createMultiBody(
+                baseMass=0.0, baseCollisionShapeIndex=shape, baseVisualShapeIndex=visual,
+                basePosition=[0.0, 0.0, _PARKED_FAR_Z_M - 5.0 * i], physicsClientId=cid,
+            )
+            p.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0,
+                             restitution=0.2, physicsClientId=cid)
+            self.bodies.append(body)
+        self._body_to_vehicle = {b: i for i, b in enumerate(self.bodies)}
+        self._dynamic = np.zeros(n_vehicles, dtype=bool)
+        self._colliding = np.ones(n_vehicles, dtype=bool)
+        self._scenery_built = False
+
+    # ------------------------------------------------------------------ body modes
+    def make_static(self, i: int, pos: np.ndarray) -> None:
+        """Fix vehicle ``i`` at ``pos`` (parked, hovering, or grounded): no integration cost."""
+        cid, b = self.client, self.bodies[i]
+        if self._dynamic[i]:
+            p.changeDynamics(b, -1, mass=0.0, physicsClientId=cid)
+            self._dynamic[i] = False
+        if not self._colliding[i]:
+            p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
+            self._colliding[i] = True
+        p.resetBasePositionAndOrientation(b, pos.tolist(), (0, 0, 0, 1), physicsClientId=cid)
+
+    def make_dynamic(self, i: int, pos: np.ndarray | None = None) -> None:
+        """Let the engine move vehicle ``i`` (in flight inside the airspace)."""
+        cid, b = self.client, self.bodies[i]
+        if not self._colliding[i]:
+            p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
+            self._colliding[i] = True
+        if pos is not None:
+            p.resetBasePositionAndOrientation(b, pos.tolist(), (0, 0, 0, 1), physicsClientId=cid)
+        if not self._dynamic[i]:
+            p.changeDynamics(b, -1, mass=self.mass_kg, localInertiaDiagonal=self._inertia,
+                             physicsClientId=cid)
+            self._dynamic[i] = True
+
+    def make_absent(self, i: int) -> None:
+        """Take vehicle ``i`` out of the engine (outside the airspace): no contacts, no cost."""
+        cid, b = self.client, self.bodies[i]
+        if self._dynamic[i]:
+            p.changeDynamics(b, -1, mass=0.0, physicsClientId=cid)
+            self._dynamic[i] = False
+        if self._colliding[i]:
+            p.setCollisionFilterGroupMask(b, -1, 0, 0, physicsClientId=cid)
+            self._colliding[i] = False
+        p.resetBasePositionAndOrientation(
+            b, [0.0, 0.0, _PARKED_FAR_Z_M - 5.0 * i], (0, 0, 0, 1), physicsClientId=cid
+        )
+
+    @property
+    def any_dynamic(self) -> bool:
+        return bool(self._dynamic.any())
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, indices: np.ndarray, velocity_mps: np.ndarray, force_n: np.ndarray | None,
+             out_pos: np.ndarray) -> None:
+        """Advance one decision step.
+
+        Args:
+            indices: ``(M,)`` vehicles that are dynamic this step.
+            velocity_mps: ``(M, 3)`` commanded velocities at the start of the step.
+            force_n: ``(M, 3)`` gust forces held over the step, or ``None``.
+            out_pos: ``(N, 3)`` array whose rows ``indices`` receive the new positions.
+        """
+        cid = self.client
+        bodies = self.bodies
+        zero = (0.0, 0.0, 0.0)
+        for k, i in enumerate(indices.tolist()):
+            p.resetBaseVelocity(bodies[i], velocity_mps[k].tolist(), zero, physicsClientId=cid)
+        if force_n is not None:
+            for k, i in enumerate(indices.tolist()):
+                f = force_n[k]
+                if f[0] != 0.0 or f[1] != 0.0 or f[2] != 0.0:
+                    b = bodies[i]
+                    pos, _ = p.getBasePositionAndOrientation(b, physicsClientId=cid)
+                    p.applyExternalForce(b, -1, f.tolist(), pos, p.WORLD_FRAME, physicsClientId=cid)
+        p.stepSimulation(physicsClientId=cid)
+        for i in indices.tolist():
+            out_pos[i] = p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)[0]
+
+    def gust_force(self, velocity_mps: np.ndarray, speed_loss: np.ndarray) -> np.ndarray:
+        """Constant force that takes ``speed_loss`` of the step's displacement away.
+
+        With the engine's semi-implicit Euler over ``n`` substeps, a constant acceleration
+        ``a`` adds ``a dt^2 (n + 1) / (2 n)`` to the displacement of a step of length ``dt``.
+
+        Args:
+            velocity_mps: ``(M, 3)`` commanded velocities.
+            speed_loss: ``(M,)`` fraction of the displacement lost (1 stops, 2 reverses).
+
+        Returns:
+            ``(M, 3)`` forces in newtons.
+        """
+        n = self.substeps
+        accel = -speed_loss[:, None] * velocity_mps * (2.0 * n / ((n + 1) * self.dt_s))
+        return accel * self.mass_kg
+
+    def contact_pairs(self) -> list[tuple[int, int]]:
+        """Vehicle pairs ``(i, j)``, ``i < j``, in contact at the end of the last step."""
+        pairs = set()
+        lookup = self._body_to_vehicle
+        for c in p.getContactPoints(physicsClientId=self.client):
+            a, b = lookup.get(c[1]), lookup.get(c[2])
+            if a is not None and b is not None and a != b:
+                pairs.add((min(a, b), max(a, b)))
+        return sorted(pairs)
+
+    def teleport(self, i: int, pos: np.ndarray) -> None:
+        p.resetBasePositionAndOrientation(self.bodies[i], pos.tolist(), (0, 0, 0, 1),
+                                          physicsClientId=self.client)
+
+    # ------------------------------------------------------------------ rendering
+    def build_scenery(self, node_xy_m: np.ndarray, node_type: np.ndarray, node_z_m: np.ndarray,
+                      airspace_radius_m: float) -> None:
+        """Visual-only bodies (no collision, no cost in stepping): ground, ports, hover spots."""
+        if self._scenery_built:
+            return
+        cid = self.client
+        extent = airspace_radius_m * 1.1
+        ground = p.createVisualShape(p.GEOM_BOX, halfExtents=[extent, extent, 0.01],
+                                     rgbaColor=(0.80, 0.84, 0.80, 1), physicsClientId=cid)
+        p.createMultiBody(0.0, -1, ground, basePosition=[0, 0, -0.02], physicsClientId=cid)
+        colours = {0: (0.25, 0.25, 0.30, 1), 1: (0.10, 0.65, 0.25, 1), 2: (1.0, 0.85, 0.2, 0.5)}
+        for xy, kind, z in zip(node_xy_m, node_type, node_z_m):
+            if kind == 2:
+                shape = p.createVisualShape(p.GEOM_SPHERE, radius=0.35, rgbaColor=colours[2],
+                                            physicsClientId=cid)
+                p.createMultiBody(0.0, -1, shape, basePosition=[xy[0], xy[1], float(z) - 0.6],
+                                  physicsClientId=cid)
+                pole = p.createVisualShape(p.GEOM_CYLINDER, radius=0.06, length=float(z),
+                                           rgbaColor=(0.6, 0.6, 0.5, 1), physicsClientId=cid)
+                p.createMultiBody(0.0, -1, pole, basePosition=[xy[0], xy[1], float(z) / 2 - 0.6],
+                                  physicsClientId=cid)
+            else:
+                shape = p.createVisualShape(p.GEOM_CYLINDER, radius=1.6, length=0.04,
+                                            rgbaColor=colours[int(kind)], physicsClientId=cid)
+                p.createMultiBody(0.0, -1, shape, basePosition=[xy[0], xy[1], 0.0],
+                                  physicsClientId=cid)
+        ring_shape = p.createVisualShape(p.GEOM_CYLINDER, radius=0.15, length=0.05,
+                                         rgbaColor=(0.3, 0.3, 0.9, 1), physicsClientId=cid)
+        for ang in np.linspace(0, 2 * np.pi, 48, endpoint=False):
+            p.createMultiBody(0.0, -1, ring_shape, basePosition=[
+                airspace_radius_m * np.cos(ang), airspace_radius_m * np.sin(ang), 0.0],
+                physicsClientId=cid)
+        self._scenery_built = True
+
+    def camera_image(self, width: int, height: int, target_m: tuple[float, float, float],
+                     distance_m: float, yaw_deg: float = 30.0, pitch_deg: float = -55.0) -> np.ndarray:
+        """Headless TinyRenderer image, shape ``(height, width, 3)`` uint8."""
+        cid = self.client
+        view = p.computeViewMatrixFromYawPitchRoll(target_m, distance_m, yaw_deg, pitch_deg, 0, 2,
+                                                   physicsClientId=cid)
+        proj = p.computeProjectionMatrixFOV(50.0, width / height, 0.5, 400.0, physicsClientId=cid)
+        _, _, rgba, _, _ = p.getCameraImage(width, height, view, proj,
+                                            renderer=p.ER_TINY_RENDERER, physicsClientId=cid)
+        return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
+
+    def close(self) -> None:
+        if self.client is not None and self.client >= 0:
+            try:
+                p.disconnect(physicsClientId=self.client)
+            except p.error:  # already disconnected (e.g. the GUI window was closed)
+                pass
+            self.client = -1
+
+    def __del__(self) -> None:  # pragma: no cover - best effort at interpreter shutdown
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def display_available() -> bool:
+    """Whether a GUI window can be opened (an X display is set)."""
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return True
+    if os.name == "nt":
+        return True
+    warnings.warn("render_mode='human' needs a display; no window is opened (no DISPLAY set)",
+                  stacklevel=3)
+    return False

@@ -1,0 +1,81 @@
+"""Observation, state and action spaces, and the translation from the simulator's arrays to
+observations. Shared by the AEC env and the single-agent env so both see the same thing."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from marl_vertiport.sim.core import (
+    EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES, STATE_PORT_FEATURES,
+    CLOCK_FEATURES, VertiportSim,
+)
+
+
+def complete_edge_index(n: int) -> np.ndarray:
+    """Edges of a complete directed graph without self-loops, shape ``(2, n (n - 1))``."""
+    src, dst = np.nonzero(~np.eye(n, dtype=bool))
+    return np.stack([src, dst]).astype(np.int64)
+
+
+def _box(shape: tuple[int, ...], low: float = -np.inf, high: float = np.inf,
+         dtype: type = np.float32) -> spaces.Box:
+    return spaces.Box(low=low, high=high, shape=shape, dtype=dtype)
+
+
+class ObservationBuilder:
+    """Builds the spaces once and the per-agent observations of one simulator.
+
+    Observation of vehicle ``v`` (a dict):
+
+    - ``observation["port_nodes"]``: ``(P, 4)`` float32, :data:`PORT_FEATURES`.
+    - ``observation["evtol_nodes"]``: ``(N, 10)`` float32, :data:`EVTOL_FEATURES`.
+    - ``observation["self"]``: ``(8,)`` float32, :data:`SELF_FEATURES` of ``v``.
+    - ``observation["port_edge_index"]``: ``(2, P (P-1))`` int64, complete graph.
+    - ``observation["evtol_edge_index"]``: ``(2, N (N-1))`` int64, complete graph.
+    - ``action_mask``: ``(A,)`` int8, 1 = legal.
+    """
+
+    def __init__(self, sim: VertiportSim) -> None:
+        self.sim = sim
+        n, p, a = sim.n, sim.layout.n_nodes, sim.actions.n
+        self.port_edges = complete_edge_index(p)
+        self.evtol_edges = complete_edge_index(n)
+        graph = spaces.Dict({
+            "port_nodes": _box((p, len(PORT_FEATURES))),
+            "evtol_nodes": _box((n, len(EVTOL_FEATURES))),
+            "self": _box((len(SELF_FEATURES),)),
+            "port_edge_index": _box(self.port_edges.shape, 0, max(p - 1, 0), np.int64),
+            "evtol_edge_index": _box(self.evtol_edges.shape, 0, max(n - 1, 0), np.int64),
+        })
+        self.observation_space = spaces.Dict({
+            "observation": graph,
+            "action_mask": spaces.Box(0, 1, shape=(a,), dtype=np.int8),
+        })
+        self.state_space = spaces.Dict({
+            "port_nodes": _box((p, len(STATE_PORT_FEATURES))),
+            "evtol_nodes": _box((n, len(EVTOL_FEATURES) + len(STATE_EXTRA_FEATURES))),
+            "clock": _box((len(CLOCK_FEATURES),)),
+            "port_edge_index": graph["port_edge_index"],
+            "evtol_edge_index": graph["evtol_edge_index"],
+        })
+        self.action_space = spaces.Discrete(a)
+
+    def observe(self, v: int) -> dict:
+        sim = self.sim
+        return {
+            "observation": {
+                "port_nodes": sim.port_nodes(),
+                "evtol_nodes": sim.evtol_nodes(v),
+                "self": sim.self_features(v),
+                "port_edge_index": self.port_edges.copy(),
+                "evtol_edge_index": self.evtol_edges.copy(),
+            },
+            "action_mask": sim.action_mask(v).copy(),
+        }
+
+    def state(self) -> dict:
+        out = self.sim.state_arrays()
+        out["port_edge_index"] = self.port_edges.copy()
+        out["evtol_edge_index"] = self.evtol_edges.copy()
+        return out

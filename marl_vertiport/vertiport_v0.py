@@ -1,0 +1,149 @@
+"""Vertiport air-traffic control, PettingZoo AEC env, version 0.
+
+Description:
+    One vertiport with normal ports, charging ports and hover spots, and a fleet of eVTOLs
+    flying to destinations outside its airspace and back on flight plans. A centralised ATC
+    gives one eVTOL an action per step, in round-robin order (turn ``t`` -> ``evtol_{t mod N}``);
+    every vehicle moves every step. Each eVTOL is an agent; one shared policy can act for all.
+
+Agents:
+    ``evtol_0 .. evtol_{N-1}``, all present for the whole episode. An agent with no decision to
+    make (outside the airspace, out of service) has only a no-op legal.
+
+Action space:
+    ``Discrete(4 + P)`` with ``P`` = ports + hover spots: 0 stay still, 1 take off,
+    ``2 .. 1+P`` move to / land on vertiport node ``k`` (normal ports, charging ports, then
+    hover spots), ``2+P`` continue previous action, ``3+P`` avoid collision.
+
+Observation space:
+    ``{"observation": {port_nodes, evtol_nodes, self, port_edge_index, evtol_edge_index},
+    "action_mask": int8}``; see ``docs/environment.md`` for each feature's index and unit.
+
+State:
+    ``state()`` is the global, noise-free graph (true positions, velocities, destinations,
+    occupants of ports) for a centralised critic; ``state_space`` describes it.
+
+Rewards:
+    The paper's weighted sum for the acting eVTOL (take-off, landing, battery, delay, safety);
+    other agents get 0 on that step.
+
+Episode end:
+    Truncation after ``schedule.episode_steps`` (1440) steps; never termination.
+
+Arguments:
+    ``config``: a config object, a dict, a YAML path, or a name in ``configs/env/``;
+    ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``; keyword overrides with dotted
+    keys (``**{"uncertainty.wind_gust_prob": 0.1}``) or whole sections.
+
+Version history:
+    v0: initial release.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.utils import seeding
+from pettingzoo import AECEnv
+from pettingzoo.utils import wrappers
+
+from marl_vertiport.config import EnvConfig, load_config
+from marl_vertiport.render import render_frame
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.physics import display_available
+from marl_vertiport.spaces import ObservationBuilder
+
+__all__ = ["env", "raw_env"]
+
+
+def env(config: str | EnvConfig | dict | None = None, render_mode: str | None = None,
+        **overrides: Any) -> AECEnv:
+    """The AEC env with PettingZoo's order-enforcing wrapper."""
+    return wrappers.OrderEnforcingWrapper(raw_env(config=config, render_mode=render_mode, **overrides))
+
+
+class raw_env(AECEnv):
+    """Unwrapped AEC env; see the module docstring."""
+
+    metadata = {
+        "render_modes": ["human", "rgb_array"],
+        "name": "vertiport_v0",
+        "is_parallelizable": False,
+        "render_fps": 8,
+    }
+
+    def __init__(self, config: str | EnvConfig | dict | None = None,
+                 render_mode: str | None = None, **overrides: Any) -> None:
+        super().__init__()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not one of "
+                             f"{self.metadata['render_modes']} or None")
+        self.config = load_config(config, **overrides)
+        self.render_mode = render_mode
+        self.sim = VertiportSim(self.config, gui=render_mode == "human" and display_available())
+        self._builder = ObservationBuilder(self.sim)
+        self.possible_agents = [f"evtol_{i}" for i in range(self.sim.n)]
+        self.agent_name_mapping = {a: i for i, a in enumerate(self.possible_agents)}
+        self.observation_spaces = dict.fromkeys(self.possible_agents, self._builder.observation_space)
+        self.action_spaces = dict.fromkeys(self.possible_agents, self._builder.action_space)
+        self.state_space = self._builder.state_space
+        self._rng: np.random.Generator | None = None
+        self.agents: list[str] = []
+
+    def observation_space(self, agent: str):
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str):
+        return self.action_spaces[agent]
+
+    def reset(self, seed: int | None = None, options: dict | None = None) -> None:
+        if seed is not None or self._rng is None:
+            self._rng, _ = seeding.np_random(seed)
+        self.sim.reset(self._rng)
+        self.agents = self.possible_agents[:]
+        self.rewards = dict.fromkeys(self.agents, 0.0)
+        self._cumulative_rewards = dict.fromkeys(self.agents, 0.0)
+        self.terminations = dict.fromkeys(self.agents, False)
+        self.truncations = dict.fromkeys(self.agents, False)
+        self.infos = {a: {} for a in self.agents}
+        self.agent_selection = self.possible_agents[self.sim.acting]
+        self._last_rewarded: str | None = None
+
+    def observe(self, agent: str) -> dict:
+        return self._builder.observe(self.agent_name_mapping[agent])
+
+    def state(self) -> dict:
+        return self._builder.state()
+
+    def step(self, action: Any) -> None:
+        agent = self.agent_selection
+        if self.terminations[agent] or self.truncations[agent]:
+            self._was_dead_step(action)
+            return
+        if self.agent_name_mapping[agent] != self.sim.acting:  # pragma: no cover - invariant
+            raise RuntimeError(f"{agent} acts out of turn (turn of evtol_{self.sim.acting})")
+        reward, info = self.sim.step(action)  # raises before any change on an illegal action
+        self._cumulative_rewards[agent] = 0.0
+        if self._last_rewarded is not None:
+            self.rewards[self._last_rewarded] = 0.0
+        self.rewards[agent] = reward
+        self._last_rewarded = agent
+        if self.sim.truncated:
+            info = dict(info, episode=self.sim.episode_metrics())
+            self.truncations = dict.fromkeys(self.agents, True)
+        self.infos = dict.fromkeys(self.agents, info)
+        self.agent_selection = self.possible_agents[self.sim.acting]
+        self._accumulate_rewards()
+        if self.render_mode == "human":
+            self.render()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            return None
+        if self.render_mode == "rgb_array":
+            return render_frame(self.sim)
+        return None  # "human": pybullet's GUI window shows the bodies as they move
+
+    def close(self) -> None:
+        self.sim.close()

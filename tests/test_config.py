@@ -1,0 +1,91 @@
+"""Every shipped YAML loads; broken configs fail at load with the field named."""
+
+from pathlib import Path
+
+import pytest
+
+from marl_vertiport import ConfigError, load_config
+from marl_vertiport.config import CONFIG_DIR, EnvConfig
+
+ALL_CONFIGS = sorted(CONFIG_DIR.glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", ALL_CONFIGS, ids=lambda p: p.stem)
+def test_every_shipped_config_loads(path):
+    cfg = load_config(path)
+    assert isinstance(cfg, EnvConfig)
+
+
+def test_paper_defaults_match_the_paper():
+    cfg = load_config("paper")
+    assert cfg.fleet_size == 4
+    assert len(cfg.layout.normal_ports_xy_m) == 2 and len(cfg.layout.charging_ports_xy_m) == 1
+    assert cfg.layout.hover_ring_count == 7 and cfg.layout.destination_ring_count == 5
+    r = cfg.reward
+    assert (r.takeoff_weight, r.landing_weight, r.battery_weight, r.delay_weight,
+            r.safety_weight) == (0.3, 0.3, 0.35, 0.1, 0.35)
+    assert cfg.schedule.episode_steps == 1440
+    assert cfg.schedule.takeoff_after_landing_min == (10, 20)
+    assert cfg.schedule.landing_window_min == 15
+    assert cfg.flight.physics_rate_hz >= 45
+    b = cfg.battery
+    assert (b.cruise_drain_pct_per_m, b.hover_drain_pct, b.ground_idle_drain_pct,
+            b.charge_pct) == (0.5, 2.0, 4.0, 10.0)
+    u = cfg.uncertainty
+    assert u.wind_gust_prob == u.charger_failure_prob == u.takeoff_failure_prob == 0.0
+    u2 = load_config("paper_uncertain").uncertainty
+    assert u2.wind_gust_prob == u2.charger_failure_prob == u2.takeoff_failure_prob == 0.05
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "cfg.yaml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("text, field", [
+    ("fleet_sise: 4\n", "fleet_sise"),
+    ("fleet_size: four\n", "fleet_size"),
+    ("layout:\n  charging_ports_xy_m: []\n", "layout.charging_ports_xy_m"),
+    ("layout:\n  destination_ring_count: 0\n", "layout.destination_ring_count"),
+    ("uncertainty:\n  wind_gust_prob: 1.5\n", "uncertainty.wind_gust_prob"),
+    ("uncertainty:\n  takeoff_failure_prob: -0.1\n", "uncertainty.takeoff_failure_prob"),
+    ("flight:\n  cruise_speed_mps: -3\n", "flight.cruise_speed_mps"),
+    ("flight:\n  physics_rate_hz: 0\n", "flight.physics_rate_hz"),
+    ("battery:\n  initial_pct: 120\n", "battery.initial_pct"),
+    ("schedule:\n  takeoff_after_landing_min: [20, 10]\n", "schedule.takeoff_after_landing_min"),
+    ("layout:\n  normal_ports_xy_m: [[100, 0]]\n", "layout.normal_ports_xy_m[0]"),
+    ("fleet_size: 20\n", "fleet_size"),
+    ("atc:\n  skip_agents_without_decision: 1\n", "atc.skip_agents_without_decision"),
+    ("- just\n- a list\n", "expected a mapping"),
+    ("flight: [1, 2\n", "not valid YAML"),
+])
+def test_broken_configs_name_the_field(tmp_path, text, field):
+    with pytest.raises(ConfigError, match=field.replace("[", r"\[").replace("]", r"\]")):
+        load_config(write(tmp_path, text))
+
+
+def test_unknown_config_name_lists_shipped_ones():
+    with pytest.raises(ConfigError, match="paper_uncertain"):
+        load_config("no_such_config")
+
+
+def test_overrides_dotted_and_sections():
+    cfg = load_config("paper", **{"uncertainty.wind_gust_prob": 0.2}, fleet_size=3)
+    assert cfg.uncertainty.wind_gust_prob == 0.2 and cfg.fleet_size == 3
+    cfg = load_config("paper", uncertainty={"charger_failure_prob": 0.3})
+    assert cfg.uncertainty.charger_failure_prob == 0.3
+    assert cfg.uncertainty.wind_gust_prob == 0.0
+    with pytest.raises(ConfigError, match="uncertainty.wind_gust"):
+        load_config("paper", **{"uncertainty.wind_gust": 0.2})
+    with pytest.raises(ConfigError, match="uncertainty.wind_gust_prob"):
+        load_config("paper", **{"uncertainty.wind_gust_prob": 2.0})
+
+
+def test_base_key_extends_a_config(tmp_path):
+    path = write(tmp_path, "base: paper\nfleet_size: 2\n")
+    cfg = load_config(path)
+    assert cfg.fleet_size == 2 and cfg.layout.hover_ring_count == 7
+    loop = write(tmp_path, f"base: {tmp_path / 'cfg.yaml'}\n")
+    with pytest.raises(ConfigError, match="includes itself"):
+        load_config(loop)

@@ -1,0 +1,85 @@
+"""closest_approach (paper eqs. 3-4) and segment distances, on cases worked by hand."""
+
+import numpy as np
+import pytest
+
+from marl_vertiport import closest_approach
+from marl_vertiport.sim.geometry import (
+    closest_approach_many, segment_distance_many, swept_min_distance,
+)
+
+
+def test_crossing_paths_meet_at_the_intersection():
+    # A at (-10, 0) flying +x at 2 m/s, B at (0, -10) flying +y at 2 m/s: both reach the
+    # origin at t = 5 s, so they collide (D_min = 0).
+    t, d = closest_approach(np.array([-10.0, 0.0]), np.array([2.0, 0.0]),
+                            np.array([0.0, -10.0]), np.array([0.0, 2.0]))
+    assert t == pytest.approx(5.0)
+    assert d == pytest.approx(0.0, abs=1e-12)
+
+
+def test_crossing_paths_with_offset_timing():
+    # B starts 2 m further back: dp = (-10, 12), dv = (2, -2); t = -(dp.dv)/|dv|^2 = 44/8.
+    t, d = closest_approach(np.array([-10.0, 0.0]), np.array([2.0, 0.0]),
+                            np.array([0.0, -12.0]), np.array([0.0, 2.0]))
+    assert t == pytest.approx(5.5)
+    # at t = 5.5: A at (1, 0), B at (0, -1) -> D = sqrt(2)
+    assert d == pytest.approx(np.sqrt(2.0))
+
+
+def test_parallel_same_speed_keeps_distance():
+    t, d = closest_approach(np.array([0.0, 0.0]), np.array([3.0, 0.0]),
+                            np.array([0.0, 4.0]), np.array([3.0, 0.0]))
+    assert t == 0.0
+    assert d == pytest.approx(4.0)
+
+
+def test_parallel_overtaking():
+    # A behind B on the same line, 2 m/s faster: closes 10 m in 5 s.
+    t, d = closest_approach(np.array([0.0, 0.0]), np.array([5.0, 0.0]),
+                            np.array([10.0, 0.0]), np.array([3.0, 0.0]))
+    assert t == pytest.approx(5.0)
+    assert d == pytest.approx(0.0, abs=1e-12)
+
+
+def test_diverging_gives_negative_time():
+    # Moving apart head-away: closest approach was in the past.
+    t, d = closest_approach(np.array([0.0, 0.0]), np.array([-1.0, 0.0]),
+                            np.array([4.0, 0.0]), np.array([1.0, 0.0]))
+    assert t == pytest.approx(-2.0)
+    assert d == pytest.approx(0.0, abs=1e-12)
+
+
+def test_identical_velocities():
+    t, d = closest_approach(np.array([1.0, 1.0]), np.array([2.0, -1.0]),
+                            np.array([4.0, 5.0]), np.array([2.0, -1.0]))
+    assert (t, d) == (0.0, pytest.approx(5.0))
+
+
+def test_vectorised_matches_scalar():
+    rng = np.random.default_rng(3)
+    p, v = rng.normal(size=2), rng.normal(size=2)
+    ps, vs = rng.normal(size=(6, 2)), rng.normal(size=(6, 2))
+    vs[2] = v  # identical velocity case
+    t, d = closest_approach_many(p, v, ps, vs)
+    for k in range(6):
+        tk, dk = closest_approach(p, v, ps[k], vs[k])
+        assert t[k] == pytest.approx(tk)
+        assert d[k] == pytest.approx(dk)
+
+
+def test_segment_distance():
+    a0, a1 = np.array([0.0, 0.0]), np.array([10.0, 0.0])
+    b0 = np.array([[5.0, -5.0], [0.0, 3.0], [12.0, 0.0], [5.0, 2.0]])
+    b1 = np.array([[5.0, 5.0], [10.0, 3.0], [15.0, 0.0], [5.0, 2.0]])  # last: a point
+    d = segment_distance_many(a0, a1, b0, b1)
+    np.testing.assert_allclose(d, [0.0, 3.0, 2.0, 2.0])
+
+
+def test_swept_min_distance_catches_a_pass_between_samples():
+    # Two vehicles swap places in one interval: the end points are 4 m apart but they pass
+    # 1 m from each other halfway.
+    start = np.array([[-2.0, 0.5, 0.0], [2.0, -0.5, 0.0]])
+    end = np.array([[2.0, 0.5, 0.0], [-2.0, -0.5, 0.0]])
+    d = swept_min_distance(start, end, np.array([0]), np.array([1]))
+    assert d[0] == pytest.approx(1.0)
