@@ -45,15 +45,15 @@ class LayoutConfig:
     """Hover spot positions; empty means a ring of ``hover_ring_count`` spots."""
     hover_ring_count: int = 7
     """Number of hover spots on the ring, used when ``hover_spots_xy_m`` is empty."""
-    hover_ring_radius_m: float = 14.0
+    hover_ring_radius_m: float = 12.0
     """Radius of the hover-spot ring around the vertiport centre."""
     destinations_xy_m: tuple[tuple[float, float], ...] = ()
     """Destinations outside the airspace; empty means a ring of ``destination_ring_count``."""
     destination_ring_count: int = 5
     """Number of destinations on the outer ring, used when ``destinations_xy_m`` is empty."""
-    destination_ring_radius_m: float = 50.0
+    destination_ring_radius_m: float = 35.0
     """Radius of the destination ring."""
-    airspace_radius_m: float = 25.0
+    airspace_radius_m: float = 20.0
     """Radius of the vertiport airspace; vehicles beyond it fly a kinematic model."""
 
 

@@ -6,7 +6,9 @@ Description:
     (same graphs, same ``action_mask``), and the reward is that eVTOL's reward.
 
 Action Space:
-    ``Discrete(4 + P)``, as in the AEC env.
+    ``Discrete(4 + P)``, as in the AEC env. ``action_space.sample()`` without a mask draws
+    uniformly among the legal actions of the eVTOL whose turn it is; an illegal action passed
+    to ``step`` raises ``ValueError``.
 
 Observation Space:
     ``Dict(observation=Dict(...), action_mask=Box(int8))``, as in the AEC env.
@@ -39,7 +41,7 @@ from marl_vertiport.config import EnvConfig, load_config
 from marl_vertiport.render import render_frame
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import display_available
-from marl_vertiport.spaces import ObservationBuilder
+from marl_vertiport.spaces import LegalDiscrete, ObservationBuilder
 
 
 class VertiportEnv(gym.Env):
@@ -57,7 +59,8 @@ class VertiportEnv(gym.Env):
         self.sim = VertiportSim(self.config, gui=render_mode == "human" and display_available())
         self._builder = ObservationBuilder(self.sim)
         self.observation_space = self._builder.observation_space
-        self.action_space = self._builder.action_space
+        # sample() draws among the legal actions of the acting eVTOL (see LegalDiscrete).
+        self.action_space = LegalDiscrete(self.sim.actions.n, self.action_masks)
         self.state_space = self._builder.state_space
 
     def _info(self, step_info: dict[str, Any]) -> dict[str, Any]:

@@ -12,6 +12,33 @@ from marl_vertiport.sim.core import (
 )
 
 
+class LegalDiscrete(spaces.Discrete):
+    """``Discrete(n)`` whose :meth:`sample` without a mask draws among the actions legal now.
+
+    Used by the single-agent env, where the legal set belongs to the eVTOL whose turn it is:
+    ``env.action_space.sample()`` is always a valid action. ``contains`` is unchanged (every
+    index is in the space; legality is the env's check). Copies and pickles are plain
+    ``Discrete`` spaces, so vector wrappers never drag the simulator along.
+    """
+
+    def __init__(self, n: int, legal_mask_fn) -> None:
+        super().__init__(n)
+        self._legal_mask_fn = legal_mask_fn
+
+    def sample(self, mask=None, probability=None):
+        if mask is None and probability is None:
+            mask = self._legal_mask_fn()
+        return super().sample(mask=mask, probability=probability)
+
+    def __deepcopy__(self, memo) -> spaces.Discrete:
+        plain = spaces.Discrete(self.n)
+        plain.np_random.bit_generator.state = self.np_random.bit_generator.state
+        return plain
+
+    def __reduce__(self):
+        return (spaces.Discrete, (int(self.n),))
+
+
 def complete_edge_index(n: int) -> np.ndarray:
     """Edges of a complete directed graph without self-loops, shape ``(2, n (n - 1))``."""
     src, dst = np.nonzero(~np.eye(n, dtype=bool))

@@ -29,6 +29,8 @@ STATUS_NAMES = ("on_port", "on_charger", "hovering", "taxiing", "departing", "aw
 _AIRBORNE = np.array([False, False, True, True, True, True, True, False])
 _IN_TRANSIT_INSIDE = np.array([False, False, False, True, True, False, True, False])
 
+_DEFLECTION_TOL_M = 1e-4  # engine position vs commanded motion; integration error is ~1e-12
+
 # Schedule status codes (feature ``schedule_status``).
 EARLY, ON_TIME, DELAYED = -1, 0, 1
 # Pending operation of a vehicle.
@@ -149,6 +151,9 @@ class VertiportSim:
         self.dt_s = fl.flight_seconds_per_step
         self.step_len_m = fl.cruise_speed_mps * fl.flight_seconds_per_step
         self.park_z_m = fl.vehicle_height_m / 2.0
+        # Largest centre distance at which two boxes can touch (corner to corner), plus slack.
+        self._touch_m = float(np.sqrt(2 * fl.vehicle_size_m ** 2 + fl.vehicle_height_m ** 2)) + 0.05
+        self._deflected: np.ndarray | None = None
         n = self.n
         self._pairs_i, self._pairs_j = np.triu_indices(n, k=1)
         self._eye = np.eye(n, dtype=np.float32)
@@ -464,30 +469,29 @@ class VertiportSim:
         self.physics.make_dynamic(v)
 
     def _avoid(self, v: int) -> None:
-        """Climb to the lowest avoidance layer no other vehicle uses, and fly the rest of the
-        leg there; hold position if every layer is taken."""
+        """Climb to the lowest avoidance layer no other vehicle uses and fly the rest of the
+        leg there. Hold position for this step instead when only vertical motion is left
+        (climbing out of or descending onto a spot) or when every layer is taken."""
         if self.avoid_layer[v] >= 0 or not self.has_target[v]:
             return
+        waypoints = [self.target[v]] + self.routes[v]
+        horizontal = [w for w in waypoints if np.hypot(*(w[:2] - self.pos[v, :2])) > 1e-9]
         used = set(self.avoid_layer[self.avoid_layer >= 0].tolist())
         layers = self.cfg.flight.avoid_altitudes_m
         free = [k for k in range(len(layers)) if k not in used]
-        if not free:
-            # No free layer: hover in place this step (the route resumes next step).
+        if not free or not horizontal:
+            # The route resumes next step from where the vehicle holds now.
             self.routes[v].insert(0, self.target[v].copy())
-            self.target[v] = self.pos[v]
+            self.target[v] = self.pos[v].copy()
             return
         k = free[0]
         alt = layers[k]
         self.avoid_layer[v] = k
-        waypoints = [self.target[v]] + self.routes[v]
         final = waypoints[-1]
-        horizontal = [w for w in waypoints if np.hypot(*(w[:2] - self.pos[v, :2])) > 1e-9]
         new_route = [np.array([self.pos[v, 0], self.pos[v, 1], alt])]
         for w in horizontal:
             new_route.append(np.array([w[0], w[1], alt]))
         if abs(final[2] - alt) > 1e-9 and self.status[v] != DEPARTING:
-            if not horizontal:
-                new_route.append(np.array([final[0], final[1], alt]))
             new_route.append(final.copy())
         # Drop duplicates created by the rewrite (consecutive equal waypoints).
         route = [new_route[0]]
@@ -558,12 +562,20 @@ class VertiportSim:
             factor = self.dt_s if loss is None else self.dt_s * (1.0 - loss[k])[:, None]
             self.pos[idx[k]] += vel[k] * factor
         inside = ~away
+        self._deflected = None
         if inside.any():
             k = np.flatnonzero(inside)
             force = None
+            expected = vel[k] * self.dt_s
             if loss is not None and loss[k].any():
                 force = self.physics.gust_force(vel[k], loss[k])
+                expected = expected * (1.0 - loss[k])[:, None]
+            expected += self.pos[idx[k]]
             self.physics.step(idx[k], vel[k], force, self.pos)
+            # Only a contact can push a body off its commanded (and gust) motion.
+            off = np.abs(self.pos[idx[k]] - expected).max(axis=1) > _DEFLECTION_TOL_M
+            if off.any():
+                self._deflected = idx[k][off]
         return n_gusts
 
     def _process_arrivals(self) -> int:
@@ -661,6 +673,14 @@ class VertiportSim:
         new_contacts = 0
         if self.physics.any_dynamic:
             pairs = set(self.physics.contact_pairs())
+            if self._deflected is not None and relevant.any():
+                # Contacts the engine resolved within the step's substeps: a deflected body
+                # and a vehicle that came within touching distance of it.
+                deflected = np.zeros(self.n, dtype=bool)
+                deflected[self._deflected] = True
+                k = np.flatnonzero(relevant & (deflected[pi] | deflected[pj]))
+                near = swept_min_distance(self.prev_pos, self.pos, pi[k], pj[k]) <= self._touch_m
+                pairs.update(zip(pi[k][near].tolist(), pj[k][near].tolist()))
             new_contacts = len(pairs - self.contact_state)
             self.contact_state = pairs
         else:

@@ -1,0 +1,34 @@
+"""Shared helpers: a policy that keeps the fleet busy, so long runs exercise flight, charging,
+landing and conflicts rather than a fleet parked with empty batteries."""
+
+import numpy as np
+
+from marl_vertiport.sim.core import HOVERING, ON_CHARGER, ON_PORT
+from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT
+
+STAY, TAKEOFF = 0, 1
+
+
+def busy_action(obs: dict, rng: np.random.Generator) -> int:
+    """A legal action from the observation alone: charge when low, take off near the
+    scheduled time, land hovering vehicles, and otherwise pick a random legal action."""
+    mask = obs["action_mask"]
+    legal = np.flatnonzero(mask)
+    own = obs["observation"]["self"]
+    ports = obs["observation"]["port_nodes"]
+    status, battery, minutes_to_schedule = int(own[0]), own[1], own[6]
+    node_actions = 2 + np.arange(len(ports))
+    free_chargers = node_actions[(ports[:, 0] == 1) & (ports[:, 1] == CHARGING_PORT)]
+    free_ports = node_actions[(ports[:, 0] == 1) & (ports[:, 1] != HOVER_SPOT)]
+    if rng.random() < 0.02:
+        return int(rng.choice(legal))
+    if status in (ON_PORT, ON_CHARGER):
+        if battery > 60 and minutes_to_schedule <= 3:
+            return TAKEOFF
+        if status == ON_PORT and battery < 90 and free_chargers.size:
+            return int(free_chargers[0])
+        return STAY
+    if status == HOVERING:
+        choice = free_chargers if free_chargers.size else free_ports
+        return int(choice[0]) if choice.size else STAY
+    return int(legal[0]) if legal.size == 1 else len(mask) - 2  # continue in transit

@@ -1,0 +1,98 @@
+"""The standard checkers of PettingZoo and Gymnasium on both envs."""
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from pettingzoo.test import api_test, render_test, seed_test
+
+import marl_vertiport  # noqa: F401  (registers the Gymnasium id)
+from marl_vertiport import vertiport_v0
+from marl_vertiport.gym_env import VertiportEnv
+
+
+@pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
+def test_pettingzoo_api(config):
+    api_test(vertiport_v0.env(config=config), num_cycles=300)
+
+
+def test_pettingzoo_seed():
+    seed_test(lambda: vertiport_v0.env(config="paper_uncertain"), num_cycles=200)
+
+
+@pytest.mark.filterwarnings("ignore:render_mode='human' needs a display:UserWarning")
+def test_pettingzoo_render():
+    render_test(lambda render_mode=None: vertiport_v0.env(render_mode=render_mode))
+
+
+@pytest.mark.filterwarnings("ignore:.*Box observation space m.*:UserWarning")
+@pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
+def test_gymnasium_check_env(config):
+    env = gymnasium.make("marl_vertiport/Vertiport-v0", config=config).unwrapped
+    check_env(env, skip_render_check=False)
+
+
+def test_gymnasium_make_and_episode_end():
+    env = gymnasium.make("marl_vertiport/Vertiport-v0", config="paper",
+                         **{"schedule.episode_steps": 30})
+    obs, info = env.reset(seed=3)
+    assert "agent" in info
+    rng = np.random.default_rng(0)
+    for step in range(30):
+        action = int(rng.choice(np.flatnonzero(obs["action_mask"])))
+        obs, reward, terminated, truncated, info = env.step(action)
+        assert not terminated
+        assert truncated == (step == 29)
+    assert info["episode"]["steps"] == 30
+
+
+def test_rgb_frame_shows_the_scene():
+    env = vertiport_v0.env(render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (360, 480, 3) and frame.dtype == np.uint8
+    # Not a blank image: ground, ports and vehicles give many distinct colours.
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 20
+    env.close()
+
+
+def test_human_mode_without_display_warns_and_runs(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.warns(UserWarning, match="display"):
+        env = vertiport_v0.env(render_mode="human")
+    env.reset(seed=0)
+    assert env.render() is None
+    env.close()
+
+
+def test_unknown_render_mode():
+    with pytest.raises(ValueError, match="render_mode"):
+        vertiport_v0.env(render_mode="ansi")
+
+
+def test_spaces_are_cached_and_contain_observations():
+    env = vertiport_v0.env()
+    env.reset(seed=1)
+    agent = env.agents[0]
+    assert env.observation_space(agent) is env.observation_space(agent)
+    assert env.observation_space(agent).contains(env.observe(agent))
+    assert env.unwrapped.state_space.contains(env.state())
+    assert env.observe(agent)["action_mask"].dtype == np.int8
+    # 4 + 2 normal + 1 charging + 7 hover spots = 14 actions (paper's table I).
+    assert env.action_space(agent).n == 14
+
+
+def test_single_agent_sample_is_legal_and_copies_are_plain():
+    import copy
+    import pickle
+
+    env = VertiportEnv()
+    obs, _ = env.reset(seed=0)
+    env.action_space.seed(0)
+    for _ in range(200):
+        action = env.action_space.sample()
+        assert obs["action_mask"][action] == 1
+        obs, *_ = env.step(action)
+    assert type(copy.deepcopy(env.action_space)) is gymnasium.spaces.Discrete
+    assert pickle.loads(pickle.dumps(env.action_space)) == gymnasium.spaces.Discrete(14)
