@@ -560,7 +560,16 @@ class VertiportSim:
         if away.any():
             k = np.flatnonzero(away)
             factor = self.dt_s if loss is None else self.dt_s * (1.0 - loss[k])[:, None]
-            self.pos[idx[k]] += vel[k] * factor
+            moved = idx[k]
+            self.pos[moved] += vel[k] * factor
+            if loss is not None:
+                # A reversing gust can push an outbound vehicle back toward the airspace: it
+                # holds at the boundary (it would otherwise be inside without a body).
+                r = np.hypot(self.pos[moved, 0], self.pos[moved, 1])
+                inside_now = (r < self.layout.airspace_radius_m) & ~self.returning[moved]
+                if inside_now.any():
+                    m = moved[inside_now]
+                    self.pos[m, :2] *= (self.layout.airspace_radius_m / r[inside_now])[:, None]
         inside = ~away
         self._deflected = None
         if inside.any():

@@ -1,0 +1,135 @@
+"""Invariants over long runs, determinism, and illegal actions through the AEC API."""
+
+import numpy as np
+import pytest
+
+from conftest import busy_action
+from marl_vertiport import IllegalActionError, vertiport_v0
+from marl_vertiport.sim.core import AWAY, HOVER_SPOT, OUT_OF_SERVICE
+
+
+def run_day(config: str, seed: int, policy: str, check=None, **overrides) -> list:
+    """Run one AEC day; return the per-step (agent, action, reward) trace."""
+    env = vertiport_v0.env(config=config, **overrides)
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed + 1)
+    trace = []
+    for agent in env.agent_iter():
+        obs, _, term, trunc, _ = env.last()
+        if term or trunc:
+            env.step(None)
+            continue
+        if policy == "random":
+            action = int(rng.choice(np.flatnonzero(obs["action_mask"])))
+        else:
+            action = busy_action(obs, rng)
+        env.step(action)
+        trace.append((agent, action, env.rewards[agent], env.unwrapped.sim.pos.copy()))
+        if check is not None:
+            check(env.unwrapped.sim, obs)
+    return trace
+
+
+def check_invariants(sim, obs) -> None:
+    assert ((sim.battery >= 0.0) & (sim.battery <= 100.0)).all()
+    # No two vehicles own (occupy or are headed for) one port or hover spot ...
+    owned = sim.node[sim.node >= 0]
+    assert len(owned) == len(set(owned.tolist()))
+    # ... and the occupancy table agrees with the vehicles.
+    for node, v in enumerate(sim.node_occupant.tolist()):
+        assert v == -1 or sim.node[v] == node
+    # Vehicles sitting still on a node are exactly there.
+    for v in range(sim.n):
+        if not sim.has_target[v] and sim.node[v] >= 0 and sim.status[v] != OUT_OF_SERVICE:
+            np.testing.assert_allclose(sim.pos[v], sim._node_pos[sim.node[v]], atol=1e-6)
+    for v in range(sim.n):
+        assert sim.action_mask(v).sum() >= 1
+    assert obs["action_mask"].sum() >= 1
+    # Vehicles outside the airspace are outside it (beyond the boundary, minus rounding).
+    away = sim.status == AWAY
+    assert (np.hypot(*sim.pos[away, :2].T) >= sim.layout.airspace_radius_m * (1 - 2e-3)).all()
+    # Hover spots are only held by airborne vehicles at hover altitude or on their way.
+    assert sim.minute == sim.step_count
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
+@pytest.mark.parametrize("policy", ["random", "busy"])
+def test_invariants_over_long_runs(config, policy):
+    for seed in range(2):
+        trace = run_day(config, seed, policy, check=check_invariants)
+        assert len(trace) == 1440
+
+
+def test_time_advances_one_minute_per_step():
+    env = vertiport_v0.env()
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    for t in range(50):
+        assert sim.minute == t
+        obs, *_ = env.last()
+        env.step(int(np.flatnonzero(obs["action_mask"])[0]))
+    assert sim.minute == 50
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
+def test_same_seed_same_actions_bit_identical(config):
+    overrides = {}
+    if config == "paper_uncertain":  # every randomised effect on, observation noise included
+        overrides = {"uncertainty.position_noise_mean_m": 1.0, "uncertainty.position_noise_std_m": 1.0,
+                     "uncertainty.action_misread_prob": 0.05}
+    a = run_day(config, 11, "busy", **overrides)
+    b = run_day(config, 11, "busy", **overrides)
+    for (ag1, act1, r1, p1), (ag2, act2, r2, p2) in zip(a, b):
+        assert (ag1, act1) == (ag2, act2)
+        assert r1 == r2  # bit-identical, not approximately equal
+        assert np.array_equal(p1, p2)
+    c = run_day(config, 12, "busy", **overrides)
+    assert any(r1 != r3 for (_, _, r1, _), (_, _, r3, _) in zip(a, c))
+
+
+def test_reset_without_seed_continues_the_generator():
+    env = vertiport_v0.env(config="paper_uncertain")
+    env.reset(seed=5)
+    first = env.unwrapped.sim.pending_time.copy()
+    env.reset()
+    second = env.unwrapped.sim.pending_time.copy()
+    env.reset(seed=5)
+    assert np.array_equal(env.unwrapped.sim.pending_time, first)
+
+
+@pytest.mark.parametrize("bad", [99, -1, 2.0, "takeoff", None, np.float32(1.0)])
+def test_illegal_action_through_the_aec_api_changes_nothing(bad):
+    env = vertiport_v0.env()
+    env.reset(seed=2)
+    sim = env.unwrapped.sim
+    agent = env.agent_selection
+    obs_before = env.observe(agent)
+    snapshot = (sim.pos.copy(), sim.battery.copy(), sim.minute, sim.status.copy(),
+                sim.node_occupant.copy(), sim.rng.bit_generator.state)
+    with pytest.raises(ValueError, match=agent) as err:
+        env.step(bad)
+    assert "legal" in str(err.value)
+    assert isinstance(err.value, IllegalActionError)
+    assert env.agent_selection == agent
+    np.testing.assert_array_equal(sim.pos, snapshot[0])
+    np.testing.assert_array_equal(sim.battery, snapshot[1])
+    assert sim.minute == snapshot[2]
+    np.testing.assert_array_equal(sim.status, snapshot[3])
+    np.testing.assert_array_equal(sim.node_occupant, snapshot[4])
+    assert sim.rng.bit_generator.state == snapshot[5]
+    obs_after = env.observe(agent)
+    np.testing.assert_array_equal(obs_before["action_mask"], obs_after["action_mask"])
+    # The env is still usable afterwards.
+    env.step(int(np.flatnonzero(obs_after["action_mask"])[0]))
+    assert sim.minute == 1
+
+
+def test_masked_out_action_names_the_legal_set():
+    env = vertiport_v0.env()
+    env.reset(seed=2)
+    obs = env.observe(env.agent_selection)
+    illegal = int(np.flatnonzero(obs["action_mask"] == 0)[0])
+    with pytest.raises(ValueError, match=r"masked out.*legal actions now"):
+        env.step(illegal)
