@@ -5,7 +5,7 @@ import pytest
 
 from marl_vertiport import closest_approach
 from marl_vertiport.sim.geometry import (
-    closest_approach_many, segment_distance_many, swept_min_distance,
+    closest_approach_many, segment_distance_many, swept_min_distance, swept_min_distance_pair,
 )
 
 
@@ -83,3 +83,15 @@ def test_swept_min_distance_catches_a_pass_between_samples():
     end = np.array([[2.0, 0.5, 0.0], [-2.0, -0.5, 0.0]])
     d = swept_min_distance(start, end, np.array([0]), np.array([1]))
     assert d[0] == pytest.approx(1.0)
+
+
+def test_scalar_and_array_swept_distances_agree():
+    rng = np.random.default_rng(5)
+    start, end = rng.normal(scale=5, size=(8, 3)), rng.normal(scale=5, size=(8, 3))
+    end[3] = start[3]  # a vehicle standing still
+    end[5] = start[5] + (end[4] - start[4])  # same motion as vehicle 4
+    pi, pj = np.triu_indices(8, k=1)
+    array = swept_min_distance(start, end, pi, pj)
+    for k, (a, b) in enumerate(zip(pi, pj)):
+        assert swept_min_distance_pair(tuple(start[a]), tuple(end[a]), tuple(start[b]),
+                                       tuple(end[b])) == pytest.approx(array[k], abs=1e-12)

@@ -128,48 +128,40 @@ class FlightPhysics:
         return bool(self._dynamic.any())
 
     # ------------------------------------------------------------------ stepping
-    def step(self, indices: np.ndarray, velocity_mps: np.ndarray, force_n: np.ndarray | None,
-             out_pos: np.ndarray) -> None:
+    def step(self, vehicles: list[int], velocity_mps: list[tuple[float, float, float]],
+             keep: list[float] | None = None) -> list[tuple[float, float, float]]:
         """Advance one decision step.
 
+        A gust is a constant force held over the step. With the engine's semi-implicit Euler
+        over ``n`` substeps, a constant acceleration ``a`` adds ``a dt^2 (n + 1) / (2 n)`` to
+        the displacement of a step of length ``dt``; the force is sized so that the step's
+        displacement is exactly ``keep`` times the commanded one.
+
         Args:
-            indices: ``(M,)`` vehicles that are dynamic this step.
-            velocity_mps: ``(M, 3)`` commanded velocities at the start of the step.
-            force_n: ``(M, 3)`` gust forces held over the step, or ``None``.
-            out_pos: ``(N, 3)`` array whose rows ``indices`` receive the new positions.
+            vehicles: the ``M`` vehicles that are dynamic this step.
+            velocity_mps: their commanded velocities at the start of the step.
+            keep: per vehicle, the fraction of the step's displacement a gust leaves
+                (1 no gust, 0 stopped, negative reversed), or ``None`` for no gusts.
+
+        Returns:
+            The ``M`` positions at the end of the step, as measured by the engine.
         """
         cid = self.client
         bodies = self.bodies
         zero = (0.0, 0.0, 0.0)
-        for k, i in enumerate(indices.tolist()):
-            p.resetBaseVelocity(bodies[i], velocity_mps[k].tolist(), zero, physicsClientId=cid)
-        if force_n is not None:
-            for k, i in enumerate(indices.tolist()):
-                f = force_n[k]
-                if f[0] != 0.0 or f[1] != 0.0 or f[2] != 0.0:
+        for i, vel in zip(vehicles, velocity_mps):
+            p.resetBaseVelocity(bodies[i], vel, zero, physicsClientId=cid)
+        if keep is not None:
+            gain = self.mass_kg * 2.0 * self.substeps / ((self.substeps + 1) * self.dt_s)
+            for i, vel, f in zip(vehicles, velocity_mps, keep):
+                if f != 1.0:
                     b = bodies[i]
                     pos, _ = p.getBasePositionAndOrientation(b, physicsClientId=cid)
-                    p.applyExternalForce(b, -1, f.tolist(), pos, p.WORLD_FRAME, physicsClientId=cid)
+                    g = -(1.0 - f) * gain
+                    p.applyExternalForce(b, -1, (g * vel[0], g * vel[1], g * vel[2]), pos,
+                                         p.WORLD_FRAME, physicsClientId=cid)
         p.stepSimulation(physicsClientId=cid)
-        for i in indices.tolist():
-            out_pos[i] = p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)[0]
-
-    def gust_force(self, velocity_mps: np.ndarray, speed_loss: np.ndarray) -> np.ndarray:
-        """Constant force that takes ``speed_loss`` of the step's displacement away.
-
-        With the engine's semi-implicit Euler over ``n`` substeps, a constant acceleration
-        ``a`` adds ``a dt^2 (n + 1) / (2 n)`` to the displacement of a step of length ``dt``.
-
-        Args:
-            velocity_mps: ``(M, 3)`` commanded velocities.
-            speed_loss: ``(M,)`` fraction of the displacement lost (1 stops, 2 reverses).
-
-        Returns:
-            ``(M, 3)`` forces in newtons.
-        """
-        n = self.substeps
-        accel = -speed_loss[:, None] * velocity_mps * (2.0 * n / ((n + 1) * self.dt_s))
-        return accel * self.mass_kg
+        return [p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)[0] for i in vehicles]
 
     def contact_pairs(self) -> list[tuple[int, int]]:
         """Vehicle pairs ``(i, j)``, ``i < j``, in contact at the end of the last step."""
