@@ -169,6 +169,7 @@ class VertiportSim:
         self._node_pos = np.column_stack([lay.node_xy_m, lay.node_z_m])
         self._is_port = lay.node_type != HOVER_SPOT
         self._charging_nodes = np.flatnonzero(lay.node_type == CHARGING_PORT)
+        self._no_charger_failure = np.zeros(len(self._charging_nodes), dtype=bool)
         un = config.uncertainty
         self._noisy_obs = un.position_noise_std_m > 0 or un.position_noise_mean_m != 0
         self.rng = np.random.default_rng(0)
@@ -202,6 +203,8 @@ class VertiportSim:
         self._moved_m: list[float] = []
         self._deflected: list[int] = []
         self._any_cmd_vel = False
+        self._holding: set[int] = set()
+        self._rel_min = np.zeros(n)  # minutes since the pending operation's scheduled time
         self.obs_xy = np.zeros((n, 2))
 
     def reset(self, rng: np.random.Generator) -> None:
@@ -235,6 +238,7 @@ class VertiportSim:
                 self.pending_time[v] = cfg.schedule.landing_window_min
             self.dest[v] = dests[v]
         self.prev_pos[:] = self.pos
+        self._update_delays()
         self.metrics = EpisodeMetrics(action_counts=np.zeros(self.actions.n, dtype=np.int64))
         self.acting = 0
         self._choose_actor(first=True)
@@ -321,6 +325,9 @@ class VertiportSim:
     def check_action(self, v: int, action: Any) -> int:
         """Return ``action`` as an int if it is legal for vehicle ``v``, else raise."""
         mask = self.action_mask(v)
+        if (type(action) is int or isinstance(action, np.integer)) and 0 <= action < len(mask) \
+                and mask[action]:
+            return int(action)
         legal = np.flatnonzero(mask).tolist()
         if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
             if isinstance(action, np.ndarray) and action.shape == () and np.issubdtype(action.dtype, np.integer):
@@ -419,10 +426,9 @@ class VertiportSim:
         info["gusts"] = gusts
         info["separation_losses"], info["contacts"] = self._measure_separation()
         info["touchdowns"] = self._process_arrivals()
-        holding = np.flatnonzero((self.status == ARRIVING) & ~self.has_target)
-        for h in holding.tolist():
+        for h in sorted(self._holding):
             self._assign_hover_spot(h)
-        charger_failed = np.zeros(len(self._charging_nodes), dtype=bool)
+        charger_failed = self._no_charger_failure
         if un.charger_failure_prob > 0:
             charger_failed = rng.random(len(self._charging_nodes)) < un.charger_failure_prob
         info["charger_failures"] = int(charger_failed.sum())
@@ -679,7 +685,9 @@ class VertiportSim:
         lay = self.layout
         free = np.flatnonzero((lay.node_type == HOVER_SPOT) & (self.node_occupant == -1))
         if free.size == 0:
-            return  # holds at the boundary until a spot frees up
+            self._holding.add(v)  # holds at the boundary until a spot frees up
+            return
+        self._holding.discard(v)
         d = np.linalg.norm(lay.node_xy_m[free] - self.pos[v, :2], axis=1)
         node = int(free[np.argmin(d)])
         self._occupy(v, node)
@@ -780,8 +788,8 @@ class VertiportSim:
 
     def _update_delays(self) -> None:
         tol = self.cfg.schedule.on_time_tolerance_min
-        late = self.minute - self.pending_time
-        self.delay = np.where((self.pending_kind != NO_OPERATION) & (late > tol), late, 0.0)
+        rel = np.subtract(self.minute, self.pending_time, out=self._rel_min)
+        np.multiply(rel, (rel > tol) & (self.pending_kind != NO_OPERATION), out=self.delay)
 
     def _draw_observation_noise(self) -> None:
         if self._noisy_obs:
@@ -796,12 +804,9 @@ class VertiportSim:
         """-1 early, 0 on time, 1 delayed, per vehicle, shape ``(N,)``."""
         tol = self.cfg.schedule.on_time_tolerance_min
         rel = self.minute - self.pending_time
-        out = np.zeros(self.n, dtype=np.int64)
-        takeoff = self.pending_kind == PENDING_TAKEOFF
-        landing = self.pending_kind == PENDING_LANDING
-        out[takeoff & (rel < -tol)] = EARLY
-        out[(takeoff | landing) & (rel > tol)] = DELAYED
-        return out
+        early = (rel < -tol) & (self.pending_kind == PENDING_TAKEOFF)
+        delayed = (rel > tol) & (self.pending_kind != NO_OPERATION)
+        return delayed.astype(np.int64) * DELAYED + early.astype(np.int64) * EARLY
 
     def _evtol_base(self) -> np.ndarray:
         if self._evtol_cache is None:
@@ -811,7 +816,7 @@ class VertiportSim:
             f[:, 2] = self.schedule_status()
             f[:, 3:5] = self.obs_xy
             f[:, 5] = self.pos[:, 2]
-            f[:, 6] = np.where(self.pending_kind != NO_OPERATION, self.pending_time - self.minute, 0.0)
+            f[:, 6] = np.where(self.pending_kind != NO_OPERATION, -self._rel_min, 0.0)
             f[:, 7] = self.delay
             f[:, 8] = self.node
             f[:, 9] = 0.0
