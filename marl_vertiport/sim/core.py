@@ -4,7 +4,7 @@ This module imports no RL or deep-learning library. The PettingZoo AEC env and t
 env are thin translations of :class:`VertiportSim`; both call :meth:`VertiportSim.step` with
 the action of the vehicle whose turn it is.
 
-Per decision step (one schedule minute): the acting vehicle's action is checked and applied,
+Per decision step (``schedule.minutes_per_step`` of schedule time, one minute by default): the acting vehicle's action is checked and applied,
 every vehicle moves for ``flight_seconds_per_step`` of flight (pybullet inside the airspace, a
 kinematic model outside it), batteries and schedules advance, and the paper's reward of the
 acting vehicle is returned.
@@ -153,6 +153,7 @@ class VertiportSim:
                                      fl.vehicle_size_m, fl.vehicle_height_m, fl.vehicle_mass_kg,
                                      gui=gui)
         self.dt_s = fl.flight_seconds_per_step
+        self.minutes_per_step = config.schedule.minutes_per_step
         self.step_len_m = fl.cruise_speed_mps * fl.flight_seconds_per_step
         self.park_z_m = fl.vehicle_height_m / 2.0
         # Largest centre distance at which two boxes can touch (corner to corner), plus slack.
@@ -213,7 +214,7 @@ class VertiportSim:
         self.rng = rng
         cfg, lay, n = self.cfg, self.layout, self.n
         self._allocate()
-        self.minute = 0
+        self.minute = 0.0
         self.step_count = 0
         self.battery[:] = cfg.battery.initial_pct
         ports = rng.permutation(lay.n_ports)
@@ -433,7 +434,7 @@ class VertiportSim:
             charger_failed = rng.random(len(self._charging_nodes)) < un.charger_failure_prob
         info["charger_failures"] = int(charger_failed.sum())
         info["battery_depletions"] = self._update_battery(status_during, charger_failed)
-        self.minute += 1
+        self.minute += self.minutes_per_step
         self.step_count += 1
         self._update_delays()
 
@@ -650,7 +651,7 @@ class VertiportSim:
                 self.landing_cleared[v] = False
                 lo, hi = cfg.schedule.takeoff_after_landing_min
                 self.pending_kind[v] = PENDING_TAKEOFF
-                self.pending_time[v] = self.minute + 1 + int(self.rng.integers(lo, hi + 1))
+                self.pending_time[v] = self.minute + self.minutes_per_step + int(self.rng.integers(lo, hi + 1))
                 self.dest[v] = int(self.rng.integers(len(lay.destination_xy_m)))
                 self.metrics.completed_trips += 1
                 return 1
@@ -674,7 +675,7 @@ class VertiportSim:
             self.status[v] = ARRIVING
             self.returning[v] = False
             self.pending_kind[v] = PENDING_LANDING
-            self.pending_time[v] = self.minute + 1 + cfg.schedule.landing_window_min
+            self.pending_time[v] = self.minute + self.minutes_per_step + cfg.schedule.landing_window_min
             self.physics.make_static(v, self.pos[v])
             self._assign_hover_spot(v)
             return 0
@@ -768,7 +769,12 @@ class VertiportSim:
 
     def _take_out_of_service(self, v: int) -> None:
         """Battery depleted in the air: emergency landing where it is, out of service for the
-        rest of the day. It keeps a port it is sitting over, so nothing lands on it."""
+        rest of the day. It keeps a port it is sitting over, so nothing lands on it. A late
+        operation it leaves undone keeps its lateness (at the end of this step) in the metrics."""
+        if self.pending_kind[v] != NO_OPERATION:
+            late = self.minute + self.minutes_per_step - self.pending_time[v]
+            if late > self.cfg.schedule.on_time_tolerance_min:
+                self.completed_delay[v] += late
         self.has_target[v] = False
         self.routes[v] = []
         self.avoid_layer[v] = -1
