@@ -241,6 +241,8 @@ def _validate(cfg: EnvConfig) -> None:
     for i, alt in enumerate(fl.avoid_altitudes_m):
         _check(alt > fl.transit_altitude_m, f"flight.avoid_altitudes_m[{i}]",
                "avoidance layers must lie above the transit altitude")
+        _check(i == 0 or alt > fl.avoid_altitudes_m[i - 1], f"flight.avoid_altitudes_m[{i}]",
+               "layers must be listed from lowest to highest")
 
     _check(sc.episode_steps >= 1, "schedule.episode_steps", "must be >= 1")
     _check(sc.minutes_per_step > 0, "schedule.minutes_per_step", "must be > 0")

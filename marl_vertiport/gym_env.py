@@ -38,7 +38,7 @@ import gymnasium as gym
 import numpy as np
 
 from marl_vertiport.config import EnvConfig, load_config
-from marl_vertiport.render import render_frame
+from marl_vertiport.render import draw_scenery, render_frame
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import display_available
 from marl_vertiport.spaces import LegalDiscrete, ObservationBuilder
@@ -58,6 +58,8 @@ class VertiportEnv(gym.Env):
         self.render_mode = render_mode
         self.sim = VertiportSim(self.config, gui=render_mode == "human" and display_available())
         self._builder = ObservationBuilder(self.sim)
+        if self.sim.physics.gui:
+            draw_scenery(self.sim)
         self.observation_space = self._builder.observation_space
         # sample() draws among the legal actions of the acting eVTOL (see LegalDiscrete).
         self.action_space = LegalDiscrete(self.sim.actions.n, self.action_masks)

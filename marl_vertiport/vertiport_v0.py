@@ -49,7 +49,7 @@ from pettingzoo import AECEnv
 from pettingzoo.utils import wrappers
 
 from marl_vertiport.config import EnvConfig, load_config
-from marl_vertiport.render import render_frame
+from marl_vertiport.render import draw_scenery, render_frame
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import display_available
 from marl_vertiport.spaces import ObservationBuilder
@@ -83,6 +83,8 @@ class raw_env(AECEnv):
         self.render_mode = render_mode
         self.sim = VertiportSim(self.config, gui=render_mode == "human" and display_available())
         self._builder = ObservationBuilder(self.sim)
+        if self.sim.physics.gui:
+            draw_scenery(self.sim)
         self.possible_agents = [f"evtol_{i}" for i in range(self.sim.n)]
         self.agent_name_mapping = {a: i for i, a in enumerate(self.possible_agents)}
         self.observation_spaces = dict.fromkeys(self.possible_agents, self._builder.observation_space)

@@ -52,6 +52,7 @@ def write(tmp_path: Path, text: str) -> Path:
     ("uncertainty:\n  takeoff_failure_prob: -0.1\n", "uncertainty.takeoff_failure_prob"),
     ("flight:\n  cruise_speed_mps: -3\n", "flight.cruise_speed_mps"),
     ("flight:\n  physics_rate_hz: 0\n", "flight.physics_rate_hz"),
+    ("flight:\n  avoid_altitudes_m: [16, 12]\n", "flight.avoid_altitudes_m[1]"),
     ("battery:\n  initial_pct: 120\n", "battery.initial_pct"),
     ("schedule:\n  takeoff_after_landing_min: [20, 10]\n", "schedule.takeoff_after_landing_min"),
     ("layout:\n  normal_ports_xy_m: [[100, 0]]\n", "layout.normal_ports_xy_m[0]"),

@@ -486,8 +486,8 @@ class VertiportSim:
 
     def _avoid(self, v: int) -> None:
         """Climb to the lowest avoidance layer no other vehicle uses and fly the rest of the
-        leg there. Hold position for this step instead when only vertical motion is left
-        (climbing out of or descending onto a spot) or when every layer is taken."""
+        leg there. Hold position for this step instead when no horizontal travel is left (the
+        final descent onto a spot) or when every layer is taken."""
         if self.avoid_layer[v] >= 0 or not self.has_target[v]:
             return
         waypoints = [self.target[v]] + self.routes[v]
@@ -769,7 +769,8 @@ class VertiportSim:
 
     def _take_out_of_service(self, v: int) -> None:
         """Battery depleted in the air: emergency landing where it is, out of service for the
-        rest of the day. It keeps a port it is sitting over, so nothing lands on it. A late
+        rest of the day. If it comes down within two vehicle sizes of a free port it takes the
+        nearest such port, so nothing lands on top of it. A late
         operation it leaves undone keeps its lateness (at the end of this step) in the metrics."""
         if self.pending_kind[v] != NO_OPERATION:
             late = self.minute + self.minutes_per_step - self.pending_time[v]
@@ -789,7 +790,7 @@ class VertiportSim:
             near = np.flatnonzero((d < self.cfg.flight.vehicle_size_m * 2) & self._is_port
                                   & (self.node_occupant == -1))
             if near.size:
-                self._occupy(v, int(near[0]))
+                self._occupy(v, int(near[np.argmin(d[near])]))
             self.physics.make_static(v, self.pos[v])
 
     def _update_delays(self) -> None:

@@ -55,7 +55,7 @@ class Layout:
         if lay.hover_spots_xy_m:
             hover = np.asarray(lay.hover_spots_xy_m, dtype=float).reshape(-1, 2)
         else:
-            # Offset by half a step so no spot sits on the axis of the port row.
+            # Rotated by half a step: no spot on the +x axis, where the ring would start.
             hover = ring(lay.hover_ring_count, lay.hover_ring_radius_m, np.pi / max(lay.hover_ring_count, 1))
         if lay.destinations_xy_m:
             dest = np.asarray(lay.destinations_xy_m, dtype=float).reshape(-1, 2)

@@ -56,6 +56,7 @@ class FlightPhysics:
         self.mass_kg = float(vehicle_mass_kg)
         s, h = vehicle_size_m, vehicle_height_m
         self._inertia = [self.mass_kg / 12 * (s * s + h * h)] * 2 + [self.mass_kg / 12 * 2 * s * s]
+        self.gui = gui
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         if self.client < 0:
             raise RuntimeError("pybullet could not open a physics client")
