@@ -56,8 +56,8 @@ class ObservationBuilder:
     Observation of vehicle ``v`` (a dict):
 
     - ``observation["port_nodes"]``: ``(P, 4)`` float32, :data:`PORT_FEATURES`.
-    - ``observation["evtol_nodes"]``: ``(N, 10)`` float32, :data:`EVTOL_FEATURES`.
-    - ``observation["self"]``: ``(8,)`` float32, :data:`SELF_FEATURES` of ``v``.
+    - ``observation["evtol_nodes"]``: ``(N, 13)`` float32, :data:`EVTOL_FEATURES`.
+    - ``observation["self"]``: ``(11,)`` float32, :data:`SELF_FEATURES` of ``v``.
     - ``observation["port_edge_index"]``: ``(2, P (P-1))`` int64, complete graph.
     - ``observation["evtol_edge_index"]``: ``(2, N (N-1))`` int64, complete graph.
     - ``action_mask``: ``(A,)`` int8, 1 = legal.

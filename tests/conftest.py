@@ -3,7 +3,7 @@ landing and conflicts rather than a fleet parked with empty batteries."""
 
 import numpy as np
 
-from marl_vertiport.sim.core import HOVERING, ON_CHARGER, ON_PORT
+from marl_vertiport.sim.core import HOVERING, ON_CHARGER, ON_PORT, SELF_FEATURES
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT
 
 STAY, TAKEOFF = 0, 1
@@ -16,7 +16,8 @@ def busy_action(obs: dict, rng: np.random.Generator) -> int:
     legal = np.flatnonzero(mask)
     own = obs["observation"]["self"]
     ports = obs["observation"]["port_nodes"]
-    status, battery, minutes_to_schedule = int(own[0]), own[1], own[6]
+    status, battery = int(own[0]), own[1]
+    minutes_to_schedule = own[SELF_FEATURES.index("minutes_to_schedule")]
     node_actions = 2 + np.arange(len(ports))
     free_chargers = node_actions[(ports[:, 0] == 1) & (ports[:, 1] == CHARGING_PORT)]
     free_ports = node_actions[(ports[:, 0] == 1) & (ports[:, 1] != HOVER_SPOT)]

@@ -5,7 +5,7 @@ import pytest
 
 from marl_vertiport import closest_approach
 from marl_vertiport.sim.geometry import (
-    closest_approach_many, segment_distance_many, swept_min_distance, swept_min_distance_pair,
+    cpa, segment_distance, swept_min_distance, swept_min_distance_pair,
 )
 
 
@@ -56,24 +56,26 @@ def test_identical_velocities():
     assert (t, d) == (0.0, pytest.approx(5.0))
 
 
-def test_vectorised_matches_scalar():
+def test_scalar_core_matches_the_public_function():
     rng = np.random.default_rng(3)
-    p, v = rng.normal(size=2), rng.normal(size=2)
-    ps, vs = rng.normal(size=(6, 2)), rng.normal(size=(6, 2))
-    vs[2] = v  # identical velocity case
-    t, d = closest_approach_many(p, v, ps, vs)
-    for k in range(6):
-        tk, dk = closest_approach(p, v, ps[k], vs[k])
-        assert t[k] == pytest.approx(tk)
-        assert d[k] == pytest.approx(dk)
+    for _ in range(20):
+        p1, v1, p2, v2 = rng.normal(size=(4, 2))
+        t, d = closest_approach(p1, v1, p2, v2)
+        assert cpa((p1 - p2).tolist(), (v1 - v2).tolist()) == (t, d)
+    # 3-D works the same way: vertical separation counts.
+    t, d = closest_approach(np.array([0.0, 0, 0]), np.array([1.0, 0, 0]),
+                            np.array([5.0, 0, 4]), np.array([-1.0, 0, 0]))
+    assert (t, d) == (pytest.approx(2.5), pytest.approx(4.0))
 
 
 def test_segment_distance():
-    a0, a1 = np.array([0.0, 0.0]), np.array([10.0, 0.0])
-    b0 = np.array([[5.0, -5.0], [0.0, 3.0], [12.0, 0.0], [5.0, 2.0]])
-    b1 = np.array([[5.0, 5.0], [10.0, 3.0], [15.0, 0.0], [5.0, 2.0]])  # last: a point
-    d = segment_distance_many(a0, a1, b0, b1)
-    np.testing.assert_allclose(d, [0.0, 3.0, 2.0, 2.0])
+    a0, a1 = (0.0, 0.0), (10.0, 0.0)
+    assert segment_distance(a0, a1, (5.0, -5.0), (5.0, 5.0)) == 0.0  # crossing
+    assert segment_distance(a0, a1, (0.0, 3.0), (10.0, 3.0)) == pytest.approx(3.0)  # parallel
+    assert segment_distance(a0, a1, (12.0, 0.0), (15.0, 0.0)) == pytest.approx(2.0)  # collinear gap
+    assert segment_distance(a0, a1, (5.0, 2.0), (5.0, 2.0)) == pytest.approx(2.0)  # a point
+    assert segment_distance(a0, a1, (13.0, 4.0), (20.0, 9.0)) == pytest.approx(5.0)  # end to end
+    assert segment_distance((1.0, 1.0), (1.0, 1.0), (4.0, 5.0), (4.0, 5.0)) == pytest.approx(5.0)
 
 
 def test_swept_min_distance_catches_a_pass_between_samples():

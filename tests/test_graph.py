@@ -38,7 +38,7 @@ def test_list_conversion_equals_pyg_collation():
         assert torch.equal(ours.edge_index, ref.edge_index)
         assert torch.equal(ours.batch, ref.batch)
         assert ours.num_graphs == ref.num_graphs == 37
-    assert g.self_features.shape == (37, 8)
+    assert g.self_features.shape == (37, 11)
     assert g.action_mask.dtype == torch.bool and g.action_mask.shape == (37, 14)
 
 
@@ -63,7 +63,7 @@ def test_gcn_on_the_batch_equals_per_graph():
     torch.manual_seed(0)
     obs_list, _ = collect(6)
     g = to_graph_batch(obs_list)
-    conv = GCNConv(10, 16)
+    conv = GCNConv(13, 16)
     pooled = global_mean_pool(conv(g.evtols.x, g.evtols.edge_index), g.evtols.batch)
     for i, o in enumerate(obs_list):
         x = torch.as_tensor(o["observation"]["evtol_nodes"]).float()
@@ -74,7 +74,7 @@ def test_gcn_on_the_batch_equals_per_graph():
 def test_state_conversion():
     _, env = collect(3)
     ports, evtols, clock = to_state_batch([env.state(), env.state()])
-    assert ports.num_graphs == 2 and evtols.x.shape == (8, 16) and clock.shape == (2, 3)
+    assert ports.num_graphs == 2 and evtols.x.shape == (8, 17) and clock.shape == (2, 3)
 
 
 def test_bad_input_is_named():

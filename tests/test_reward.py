@@ -164,6 +164,7 @@ def put_on_route(sim, v, start, end):
     sim.pending_kind[v] = NO_OPERATION
     sim._set_route(v, [np.array(end, dtype=float)], end[2])
     sim.physics.make_dynamic(v, sim.pos[v])
+    sim._refresh_conflicts()  # the probe runs at the end of each step; rerun it after the edit
 
 
 def crossing(sim, alt_b=4.0):

@@ -20,7 +20,7 @@ import numpy as np
 
 from marl_vertiport.config import EnvConfig
 from marl_vertiport.sim.geometry import (
-    closest_approach_many, segment_distance_many, swept_min_distance, swept_min_distance_pair,
+    cpa, segment_distance, swept_min_distance, swept_min_distance_pair,
 )
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
 from marl_vertiport.sim.physics import FlightPhysics
@@ -41,15 +41,15 @@ EARLY, ON_TIME, DELAYED = -1, 0, 1
 NO_OPERATION, PENDING_TAKEOFF, PENDING_LANDING = 0, 1, 2
 
 #: Columns of the eVTOL graph's node features in observations.
-EVTOL_FEATURES = ("status", "battery_pct", "schedule_status", "x_m", "y_m", "z_m",
-                  "minutes_to_schedule", "delay_min", "node", "is_self")
+EVTOL_FEATURES = ("status", "battery_pct", "schedule_status", "x_m", "y_m", "z_m", "vx_mps",
+                  "vy_mps", "minutes_to_schedule", "delay_min", "conflict", "node", "is_self")
 #: Columns of the acting eVTOL's own feature vector (``self`` in observations).
-SELF_FEATURES = EVTOL_FEATURES[:8]
+SELF_FEATURES = EVTOL_FEATURES[:11]
+_IS_SELF = EVTOL_FEATURES.index("is_self")
 #: Columns of the vertiport graph's node features (paper: availability, type, location).
 PORT_FEATURES = ("available", "type", "x_m", "y_m")
 #: Extra columns of the eVTOL nodes in the global state, after EVTOL_FEATURES.
-STATE_EXTRA_FEATURES = ("vx_mps", "vy_mps", "vz_mps", "destination_x_m", "destination_y_m",
-                        "avoid_layer")
+STATE_EXTRA_FEATURES = ("vz_mps", "destination_x_m", "destination_y_m", "avoid_layer")
 #: Extra column of the port nodes in the global state: index of the occupying/reserving vehicle.
 STATE_PORT_FEATURES = PORT_FEATURES + ("occupant",)
 #: Entries of the ``clock`` array of the global state.
@@ -206,6 +206,8 @@ class VertiportSim:
         self._any_cmd_vel = False
         self._holding: set[int] = set()
         self._rel_min = np.zeros(n)  # minutes since the pending operation's scheduled time
+        self.plan_vel_xy = np.zeros((n, 2))
+        self.conflict = np.zeros(n, dtype=bool)
         self.obs_xy = np.zeros((n, 2))
 
     def reset(self, rng: np.random.Generator) -> None:
@@ -240,6 +242,7 @@ class VertiportSim:
             self.dest[v] = dests[v]
         self.prev_pos[:] = self.pos
         self._update_delays()
+        self._refresh_conflicts()
         self.metrics = EpisodeMetrics(action_counts=np.zeros(self.actions.n, dtype=np.int64))
         self.acting = 0
         self._choose_actor(first=True)
@@ -379,7 +382,7 @@ class VertiportSim:
 
         # ---- safety term, from the state before anything moves (paper eqs. 3-5)
         safety = 0.0
-        if _IN_TRANSIT_INSIDE[self.status[v]] and self._predicted_conflict(v):
+        if self.conflict[v]:
             safety = mag if a == acts.avoid else -mag
         info["conflict"] = safety != 0.0
 
@@ -452,6 +455,7 @@ class VertiportSim:
         metrics.avoided_conflicts += int(safety > 0)
         metrics.action_counts[a] += 1
 
+        self._refresh_conflicts()
         self._mask_cache = {}
         self._evtol_cache = None
         self._choose_actor()
@@ -517,40 +521,43 @@ class VertiportSim:
         self._set_route(v, route, alt)
 
     # ================================================================== safety
-    def _predicted_conflict(self, v: int) -> bool:
-        """Paper's conflict check for the acting vehicle: another in-transit vehicle whose
-        planned 2-D path comes within the separation distance of ours (our reading of
-        "intersecting paths" for vehicles with a footprint), in the same altitude layer, and
-        whose closest approach lies ahead (t_min >= 0) and within the separation distance."""
-        others = np.flatnonzero(_IN_TRANSIT_INSIDE[self.status] & self.has_target)
-        others = others[others != v]
-        if others.size == 0 or not self.has_target[v]:
-            return False
-        sep = self.cfg.safety.min_separation_m
-        others = others[np.abs(self.leg_alt[others] - self.leg_alt[v]) < sep]
-        if others.size == 0:
-            return False
-        ends = np.stack([self._leg_end_xy(o) for o in others.tolist()])
-        seg = segment_distance_many(self.pos[v, :2], self._leg_end_xy(v), self.pos[others, :2], ends)
-        others = others[seg < sep]
-        if others.size == 0:
-            return False
-        vel = self._planned_velocity_xy(np.append(others, v))
-        t_min, d_min = closest_approach_many(self.pos[v, :2], vel[-1], self.pos[others, :2], vel[:-1])
-        return bool(np.any((t_min >= 0.0) & (d_min <= sep)))
+    def _refresh_conflicts(self) -> None:
+        """The ATC's conflict probe, for every vehicle in transit inside the airspace: its
+        planned horizontal velocity (toward its current waypoint at cruise speed, 0 while it
+        climbs or descends) and whether it is in a predicted conflict (the paper's check).
 
-    def _leg_end_xy(self, v: int) -> np.ndarray:
-        """Horizontal end of the vehicle's path inside the airspace."""
-        return (self.routes[v][-1] if self.routes[v] else self.target[v])[:2]
-
-    def _planned_velocity_xy(self, idx: np.ndarray) -> np.ndarray:
-        """Horizontal velocity the controller commands toward the current waypoint, ``(K, 2)``."""
-        delta = self.target[idx, :2] - self.pos[idx, :2]
-        dist = np.linalg.norm(delta, axis=1)
+        A pair conflicts when both fly legs less than the separation apart in altitude, their
+        planned 2-D paths come within the separation distance of each other (our reading of
+        "intersecting paths" for vehicles with a footprint), and their closest approach lies
+        ahead (``t_min >= 0``) and within the separation distance (eqs. 3-4). The relation is
+        symmetric; the safety term of a step uses the acting vehicle's flag.
+        """
+        self.plan_vel_xy[:] = 0.0
+        self.conflict[:] = False
+        cand = np.flatnonzero(_IN_TRANSIT_INSIDE[self.status] & self.has_target).tolist()
+        if not cand:
+            return
         speed = self.cfg.flight.cruise_speed_mps
-        safe = np.where(dist > 1e-9, dist, 1.0)
-        # A vehicle climbing or descending (no horizontal offset) has no horizontal velocity.
-        return np.where(dist[:, None] > 1e-9, delta / safe[:, None] * speed, 0.0)
+        pos, target = self.pos.tolist(), self.target.tolist()
+        vel, start, end = {}, {}, {}
+        for v in cand:
+            dx, dy = target[v][0] - pos[v][0], target[v][1] - pos[v][1]
+            d = math.hypot(dx, dy)
+            vel[v] = (dx / d * speed, dy / d * speed) if d > 1e-9 else (0.0, 0.0)
+            self.plan_vel_xy[v] = vel[v]
+            start[v] = (pos[v][0], pos[v][1])
+            end[v] = tuple((self.routes[v][-1] if self.routes[v] else self.target[v])[:2].tolist())
+        sep = self.cfg.safety.min_separation_m
+        for i, a in enumerate(cand):
+            for b in cand[i + 1:]:
+                if abs(self.leg_alt[a] - self.leg_alt[b]) >= sep:
+                    continue
+                if segment_distance(start[a], end[a], start[b], end[b]) >= sep:
+                    continue
+                t_min, d_min = cpa([start[a][0] - start[b][0], start[a][1] - start[b][1]],
+                                   [vel[a][0] - vel[b][0], vel[a][1] - vel[b][1]])
+                if t_min >= 0.0 and d_min <= sep:
+                    self.conflict[a] = self.conflict[b] = True
 
     # ================================================================== motion
     def _move(self) -> int:
@@ -823,10 +830,12 @@ class VertiportSim:
             f[:, 2] = self.schedule_status()
             f[:, 3:5] = self.obs_xy
             f[:, 5] = self.pos[:, 2]
-            f[:, 6] = np.where(self.pending_kind != NO_OPERATION, -self._rel_min, 0.0)
-            f[:, 7] = self.delay
-            f[:, 8] = self.node
-            f[:, 9] = 0.0
+            f[:, 6:8] = self.plan_vel_xy
+            f[:, 8] = np.where(self.pending_kind != NO_OPERATION, -self._rel_min, 0.0)
+            f[:, 9] = self.delay
+            f[:, 10] = self.conflict
+            f[:, 11] = self.node
+            f[:, 12] = 0.0
             self._evtol_cache = f
         return self._evtol_cache
 
@@ -837,13 +846,13 @@ class VertiportSim:
         return f
 
     def evtol_nodes(self, observer: int) -> np.ndarray:
-        """eVTOL graph node features ``(N, 10)`` as seen by vehicle ``observer``."""
+        """eVTOL graph node features ``(N, 13)`` as seen by vehicle ``observer``."""
         f = self._evtol_base().copy()
-        f[observer, 9] = 1.0
+        f[observer, _IS_SELF] = 1.0
         return f
 
     def self_features(self, v: int) -> np.ndarray:
-        return self._evtol_base()[v, :8].copy()
+        return self._evtol_base()[v, : len(SELF_FEATURES)].copy()
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Global, noise-free graph for a centralised critic."""
@@ -851,12 +860,12 @@ class VertiportSim:
         evtol = np.empty((self.n, len(EVTOL_FEATURES) + len(STATE_EXTRA_FEATURES)), dtype=np.float32)
         evtol[:, : len(EVTOL_FEATURES)] = base
         evtol[:, 3:5] = self.pos[:, :2]
-        evtol[:, 9] = 0.0
-        evtol[self.acting, 9] = 1.0
+        evtol[:, _IS_SELF] = 0.0
+        evtol[self.acting, _IS_SELF] = 1.0
         k = len(EVTOL_FEATURES)
-        evtol[:, k:k + 3] = self.cmd_vel
-        evtol[:, k + 3:k + 5] = self.layout.destination_xy_m[self.dest]
-        evtol[:, k + 5] = self.avoid_layer
+        evtol[:, k] = self.cmd_vel[:, 2]
+        evtol[:, k + 1:k + 3] = self.layout.destination_xy_m[self.dest]
+        evtol[:, k + 3] = self.avoid_layer
         ports = np.empty((self.layout.n_nodes, len(STATE_PORT_FEATURES)), dtype=np.float32)
         ports[:, :4] = self.port_nodes()
         ports[:, 4] = self.node_occupant

@@ -27,78 +27,43 @@ def closest_approach(
     Returns:
         ``(t_min, d_min)`` in seconds and metres.
     """
-    dp = np.asarray(p1, dtype=float) - np.asarray(p2, dtype=float)
-    dv = np.asarray(v1, dtype=float) - np.asarray(v2, dtype=float)
-    dv2 = float(dv @ dv)
+    dp = (np.asarray(p1, dtype=float) - np.asarray(p2, dtype=float)).tolist()
+    dv = (np.asarray(v1, dtype=float) - np.asarray(v2, dtype=float)).tolist()
+    return cpa(dp, dv)
+
+
+def cpa(dp: list[float], dv: list[float]) -> tuple[float, float]:
+    """:func:`closest_approach` on the relative position ``dp`` and velocity ``dv`` given as
+    plain sequences of floats (the scalar core, used on hot paths)."""
+    dv2 = sum(c * c for c in dv)
     if dv2 <= _EPS:
-        return 0.0, float(np.sqrt(dp @ dp))
-    t_min = -float(dp @ dv) / dv2
-    closest = dp + t_min * dv
-    return t_min, float(np.sqrt(closest @ closest))
+        return 0.0, math.sqrt(sum(c * c for c in dp))
+    t_min = -sum(a * b for a, b in zip(dp, dv)) / dv2
+    return t_min, math.sqrt(sum((a + t_min * b) ** 2 for a, b in zip(dp, dv)))
 
 
-def closest_approach_many(
-    p: np.ndarray, v: np.ndarray, others_p: np.ndarray, others_v: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised :func:`closest_approach` of one vehicle against ``K`` others.
-
-    Args:
-        p, v: shape ``(2,)``; others_p, others_v: shape ``(K, 2)``.
-
-    Returns:
-        ``t_min`` and ``d_min``, each of shape ``(K,)``.
-    """
-    dp = p[None, :] - others_p
-    dv = v[None, :] - others_v
-    dv2 = np.einsum("ij,ij->i", dv, dv)
-    moving = dv2 > _EPS
-    t_min = np.where(moving, -np.einsum("ij,ij->i", dp, dv) / np.where(moving, dv2, 1.0), 0.0)
-    closest = dp + t_min[:, None] * dv
-    return t_min, np.sqrt(np.einsum("ij,ij->i", closest, closest))
+def segment_distance(a0: tuple, a1: tuple, b0: tuple, b1: tuple) -> float:
+    """Smallest distance between the 2-D segments ``a0-a1`` and ``b0-b1`` (metres); zero when
+    they intersect. Degenerate segments (points) are allowed."""
+    dax, day = a1[0] - a0[0], a1[1] - a0[1]
+    dbx, dby = b1[0] - b0[0], b1[1] - b0[1]
+    denom = dax * dby - day * dbx
+    if abs(denom) > _EPS:
+        ex, ey = b0[0] - a0[0], b0[1] - a0[1]
+        s = (ex * dby - ey * dbx) / denom
+        t = (ex * day - ey * dax) / denom
+        if 0.0 <= s <= 1.0 and 0.0 <= t <= 1.0:
+            return 0.0
+    return min(_point_segment(a0, b0, dbx, dby), _point_segment(a1, b0, dbx, dby),
+               _point_segment(b0, a0, dax, day), _point_segment(b1, a0, dax, day))
 
 
-def segment_distance_many(
-    a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray
-) -> np.ndarray:
-    """Smallest distance between segment ``a0-a1`` and each segment ``b0[k]-b1[k]`` in 2-D.
-
-    Zero when the segments intersect. Degenerate segments (points) are allowed.
-
-    Args:
-        a0, a1: shape ``(2,)``; b0, b1: shape ``(K, 2)``.
-
-    Returns:
-        Distances in metres, shape ``(K,)``.
-    """
-    a0 = np.broadcast_to(a0, b0.shape)
-    a1 = np.broadcast_to(a1, b0.shape)
-    da = a1 - a0
-    db = b1 - b0
-
-    def cross(u: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
-
-    denom = cross(da, db)
-    diff = b0 - a0
-    safe = np.where(np.abs(denom) > _EPS, denom, 1.0)
-    s = cross(diff, db) / safe
-    t = cross(diff, da) / safe
-    intersect = (np.abs(denom) > _EPS) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
-
-    def point_to_segment(pt: np.ndarray, s0: np.ndarray, d: np.ndarray) -> np.ndarray:
-        dd = np.einsum("ij,ij->i", d, d)
-        u = np.where(dd > _EPS, np.einsum("ij,ij->i", pt - s0, d) / np.where(dd > _EPS, dd, 1.0), 0.0)
-        u = np.clip(u, 0.0, 1.0)
-        closest = s0 + u[:, None] * d
-        return np.linalg.norm(pt - closest, axis=1)
-
-    dist = np.minimum.reduce([
-        point_to_segment(a0, b0, db),
-        point_to_segment(a1, b0, db),
-        point_to_segment(b0, a0, da),
-        point_to_segment(b1, a0, da),
-    ])
-    return np.where(intersect, 0.0, dist)
+def _point_segment(pt: tuple, s0: tuple, dx: float, dy: float) -> float:
+    dd = dx * dx + dy * dy
+    u = 0.0
+    if dd > _EPS:
+        u = min(1.0, max(0.0, ((pt[0] - s0[0]) * dx + (pt[1] - s0[1]) * dy) / dd))
+    return math.hypot(pt[0] - s0[0] - u * dx, pt[1] - s0[1] - u * dy)
 
 
 def swept_min_distance(
