@@ -9,7 +9,11 @@ STAMP  := $(VENV)/.installed
 CONFIG ?= paper
 
 .DEFAULT_GOAL := help
-.PHONY: help venv test test-fast train env-demo clean
+AGENTS   ?= random fcfs heuristic
+EPISODES ?= 50
+AGENT    ?= heuristic
+
+.PHONY: help venv test test-fast train evaluate results render env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-10s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -36,6 +40,15 @@ test-fast: $(STAMP)  ## the test suite without the full-episode tests
 train: $(STAMP)  ## train on the default config (CONFIG=..., RESUME=<run>)
 	@if [ -f agents/train.py ]; then $(PY) -m agents.train --config $(CONFIG) $(if $(RESUME),--resume $(RESUME)); \
 	else $(PY) -m marl_vertiport.cli demo --config $(CONFIG); fi
+
+evaluate: $(STAMP)  ## evaluate AGENTS on both cases, EPISODES per case (JSON, CSV, figures in runs/eval)
+	$(PY) -m agents.evaluate --agents $(AGENTS) --episodes $(EPISODES) --out runs/eval
+
+results: $(STAMP)  ## regenerate docs/results.md and its figures (50 episodes per case)
+	$(PY) -m agents.evaluate --agents random fcfs heuristic --episodes 50 --out docs/results --report docs/results.md
+
+render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
+	$(PY) -m agents.render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif
 
 env-demo: $(STAMP)  ## run one day of the env with random legal actions and print its metrics
 	$(PY) -m marl_vertiport.cli demo --config $(CONFIG)

@@ -1,0 +1,172 @@
+"""The controller interface, a named view of observations, and episode runners.
+
+A controller (policy) is any object with ``act(observation) -> int`` that returns a legal action
+for the eVTOL whose observation it gets (the observation of the AEC env, which is also the
+single-agent env's observation), and optionally ``reset(seed)`` called at the start of every
+episode. One object acts for every eVTOL in turn, as the centralised ATC does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from marl_vertiport.sim.core import (
+    ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE,
+    PORT_FEATURES, TAXIING,
+)
+from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, NORMAL_PORT
+
+__all__ = [
+    "ARRIVING", "AWAY", "DEPARTING", "HOVERING", "ON_CHARGER", "ON_PORT", "OUT_OF_SERVICE",
+    "TAXIING", "CHARGING_PORT", "HOVER_SPOT", "NORMAL_PORT", "Controller", "Observation",
+    "Policy", "run_aec_episode", "run_gym_episode",
+]
+
+_COL = {name: i for i, name in enumerate(EVTOL_FEATURES)}
+_PORT_COL = {name: i for i, name in enumerate(PORT_FEATURES)}
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What the evaluation, the renderer and the envs' loops need from a controller."""
+
+    def act(self, observation: dict) -> int: ...
+
+
+class Controller:
+    """Convenience base class: ``reset`` does nothing, ``__call__`` is ``act``."""
+
+    name = "controller"
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start of an episode; ``seed`` seeds any randomness of the controller."""
+
+    def act(self, observation: dict) -> int:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def __call__(self, observation: dict) -> int:
+        return self.act(observation)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """Named access to one AEC observation (see docs/environment.md, section 5).
+
+    ``fleet(name)`` gives a column of the eVTOL graph for every vehicle, ``ports(name)`` a column
+    of the vertiport graph; ``me`` is the index of the observing (acting) eVTOL.
+    """
+
+    raw: dict
+
+    @cached_property
+    def _evtols(self) -> np.ndarray:
+        return np.asarray(self.raw["observation"]["evtol_nodes"])
+
+    @cached_property
+    def _ports(self) -> np.ndarray:
+        return np.asarray(self.raw["observation"]["port_nodes"])
+
+    @cached_property
+    def mask(self) -> np.ndarray:
+        return np.asarray(self.raw["action_mask"])
+
+    @cached_property
+    def me(self) -> int:
+        return int(np.argmax(self._evtols[:, _COL["is_self"]]))
+
+    def fleet(self, name: str) -> np.ndarray:
+        return self._evtols[:, _COL[name]]
+
+    def mine(self, name: str) -> float:
+        return float(self._evtols[self.me, _COL[name]])
+
+    def ports(self, name: str) -> np.ndarray:
+        return self._ports[:, _PORT_COL[name]]
+
+    @property
+    def status(self) -> int:
+        return int(self.mine("status"))
+
+    @property
+    def n_nodes(self) -> int:
+        return self._ports.shape[0]
+
+    # Action indices (paper's table I order; docs/environment.md, section 4).
+    stay = 0
+    takeoff = 1
+
+    def go_to(self, node: int) -> int:
+        """Action that moves to / lands on vertiport node ``node``."""
+        return 2 + int(node)
+
+    @property
+    def continue_(self) -> int:
+        return 2 + self.n_nodes
+
+    @property
+    def avoid(self) -> int:
+        return 3 + self.n_nodes
+
+    def free_nodes(self, node_type: int) -> np.ndarray:
+        """Indices of the free nodes of one type (NORMAL_PORT, CHARGING_PORT, HOVER_SPOT)."""
+        return np.flatnonzero((self.ports("available") == 1) & (self.ports("type") == node_type))
+
+    def node_type(self, node: int) -> int:
+        return int(self.ports("type")[int(node)])
+
+    def legal(self) -> np.ndarray:
+        return np.flatnonzero(self.mask)
+
+
+def _check_legal(policy: Any, agent: str, action: Any, mask: np.ndarray) -> int:
+    name = getattr(policy, "name", type(policy).__name__)
+    legal = np.flatnonzero(mask).tolist()
+    try:
+        a = int(action)
+    except (TypeError, ValueError):
+        raise ValueError(f"controller {name!r} returned {action!r} for {agent}, not an integer "
+                         f"action; legal actions were {legal}") from None
+    if a != action or a < 0 or a >= len(mask) or not mask[a]:
+        raise ValueError(f"controller {name!r} returned the illegal action {action!r} for "
+                         f"{agent}; legal actions were {legal}")
+    return a
+
+
+def run_aec_episode(env: Any, policy: Any, seed: int, on_step=None) -> dict[str, Any]:
+    """One episode of the AEC env driven by ``policy``; returns the episode metrics.
+
+    ``on_step(agent, action, env)`` is called after every live step (for recording frames or
+    actions). A policy returning an illegal action raises ``ValueError`` naming it.
+    """
+    env.reset(seed=seed)
+    if hasattr(policy, "reset"):
+        policy.reset(seed=seed)
+    info: dict[str, Any] = {}
+    for agent in env.agent_iter():
+        obs, _, termination, truncation, info = env.last()
+        if termination or truncation:
+            env.step(None)
+            continue
+        action = _check_legal(policy, agent, policy.act(obs), obs["action_mask"])
+        env.step(action)
+        if on_step is not None:
+            on_step(agent, action, env)
+    return info["episode"]
+
+
+def run_gym_episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
+    """One episode of the single-agent env driven by the same kind of ``policy``."""
+    obs, _ = env.reset(seed=seed)
+    if hasattr(policy, "reset"):
+        policy.reset(seed=seed)
+    truncated = terminated = False
+    info: dict[str, Any] = {}
+    while not (truncated or terminated):
+        action = _check_legal(policy, info.get("agent", "the acting eVTOL"), policy.act(obs),
+                              obs["action_mask"])
+        obs, _, terminated, truncated, info = env.step(action)
+    return info["episode"]
