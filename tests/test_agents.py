@@ -1,0 +1,149 @@
+"""Controllers: legality over full days, FCFS's rules on hand-built situations, and the
+ordering random < FCFS < heuristic on fixed seeds."""
+
+import numpy as np
+import pytest
+
+from agents.base import (
+    ARRIVING, AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, run_aec_episode, run_gym_episode,
+)
+from agents.fcfs import FCFSController
+from agents.heuristic import DispatcherController
+from agents.registry import AgentSpecError, make_controller
+from agents.seeds import EVAL_SEEDS
+from marl_vertiport import vertiport_v0
+from marl_vertiport.gym_env import VertiportEnv
+from marl_vertiport.sim.core import EVTOL_FEATURES
+
+COL = {name: i for i, name in enumerate(EVTOL_FEATURES)}
+# Default layout: nodes 0-1 normal ports, 2 the charging port, 3-9 hover spots.
+NODE_TYPES = [0, 0, 1, 2, 2, 2, 2, 2, 2, 2]
+STAY, TAKEOFF, CONTINUE = 0, 1, 12
+
+
+def make_obs(vehicles: list[dict], me: int, free_nodes: set[int]) -> dict:
+    """A hand-built observation: ``vehicles`` give status, battery and minutes_to_schedule."""
+    evtols = np.zeros((len(vehicles), len(EVTOL_FEATURES)), dtype=np.float32)
+    for i, v in enumerate(vehicles):
+        evtols[i, COL["status"]] = v["status"]
+        evtols[i, COL["battery_pct"]] = v.get("battery", 100.0)
+        evtols[i, COL["minutes_to_schedule"]] = v.get("to_go", 0.0)
+    evtols[me, COL["is_self"]] = 1.0
+    ports = np.zeros((10, 4), dtype=np.float32)
+    ports[:, 1] = NODE_TYPES
+    ports[list(free_nodes), 0] = 1.0
+    mask = np.zeros(14, dtype=np.int8)
+    status = vehicles[me]["status"]
+    if status in (ON_PORT, ON_CHARGER):
+        mask[[STAY, TAKEOFF]] = 1
+        mask[[2 + k for k in free_nodes if k < 3]] = 1
+    elif status == HOVERING:
+        mask[STAY] = 1
+        mask[[2 + k for k in free_nodes]] = 1
+    else:
+        mask[CONTINUE] = 1
+    return {"observation": {"evtol_nodes": evtols, "port_nodes": ports}, "action_mask": mask}
+
+
+def test_fcfs_lands_in_arrival_order_and_skips_the_rest():
+    fcfs = FCFSController()
+    # evtol_2 arrived first (seen hovering on an earlier turn), evtol_0 later.
+    fcfs.act(make_obs([{"status": AWAY}, {"status": AWAY}, {"status": HOVERING}], 2, {2}))
+    fleet = [{"status": HOVERING}, {"status": AWAY}, {"status": HOVERING}]
+    # evtol_0 is not at the head: skipped even though the charger is free.
+    assert fcfs.act(make_obs(fleet, 0, {2, 5})) == STAY
+    # evtol_2 is at the head: lands, preferring the free charging port (node 2 -> action 4).
+    assert fcfs.act(make_obs(fleet, 2, {0, 2})) == 4
+    # No charger free: a free normal port (node 1 -> action 3).
+    assert fcfs.act(make_obs(fleet, 2, {1})) == 3
+    # Once evtol_2 is taxiing in, evtol_0 heads the queue.
+    fleet[2] = {"status": TAXIING}
+    assert fcfs.act(make_obs(fleet, 0, {0})) == 2
+
+
+def test_fcfs_sixty_percent_rule():
+    fcfs = FCFSController()
+    # Take-off time has come but only 55 %: no request; it moves to the free charger.
+    low = [{"status": ON_PORT, "battery": 55.0, "to_go": -1}]
+    assert fcfs.act(make_obs(low, 0, {2})) == 4
+    # On the charger still below 60 %: it charges.
+    charging = [{"status": ON_CHARGER, "battery": 59.0, "to_go": -2}]
+    assert fcfs.act(make_obs(charging, 0, set())) == STAY
+    # At 60 % with its time come it requests, heads the queue and takes off.
+    ready = [{"status": ON_CHARGER, "battery": 60.0, "to_go": -3}]
+    assert fcfs.act(make_obs(ready, 0, set())) == TAKEOFF
+
+
+def test_fcfs_takeoff_queue_in_request_order():
+    fcfs = FCFSController()
+    # evtol_1 requests first (its time came first); evtol_0's time comes later.
+    fcfs.act(make_obs([{"status": ON_PORT, "to_go": 4}, {"status": ON_PORT, "to_go": 0}], 1, set()))
+    both = [{"status": ON_PORT, "to_go": 0}, {"status": ON_PORT, "to_go": -4}]
+    assert fcfs.act(make_obs(both, 0, set())) == STAY       # behind evtol_1: skipped
+    assert fcfs.act(make_obs(both, 1, set())) == TAKEOFF    # head of the queue
+    # Not yet its time: no request, it waits.
+    assert FCFSController().act(make_obs([{"status": ON_PORT, "to_go": 3}], 0, set())) == STAY
+
+
+def test_heuristic_avoids_flagged_conflicts_and_uses_the_charger():
+    ctl = DispatcherController()
+    obs = make_obs([{"status": TAXIING}, {"status": TAXIING}], 0, set())
+    obs["action_mask"][13] = 1
+    assert ctl.act(obs) == CONTINUE
+    obs["observation"]["evtol_nodes"][:, COL["conflict"]] = 1.0
+    assert ctl.act(obs) == 13  # avoid collision
+    hovering = make_obs([{"status": HOVERING, "battery": 60.0, "to_go": 10}], 0, {0, 2})
+    assert ctl.act(hovering) == 4  # lands on the charger rather than a normal port
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
+@pytest.mark.parametrize("name", ["fcfs", "heuristic"])
+def test_full_days_with_only_legal_actions(config, name):
+    env = vertiport_v0.env(config=config)
+    metrics = run_aec_episode(env, make_controller(name), EVAL_SEEDS[0])  # raises if illegal
+    assert metrics["steps"] == 1440 and metrics["completed_trips"] >= 1
+
+
+@pytest.mark.slow
+def test_ordering_random_fcfs_heuristic_on_fixed_seeds():
+    seeds = EVAL_SEEDS[900:903]
+    means = {}
+    for name in ("random", "fcfs", "heuristic"):
+        rewards = []
+        for config in ("paper", "paper_uncertain"):
+            env = vertiport_v0.env(config=config)
+            rewards += [run_aec_episode(env, make_controller(name), s)["total_reward"] for s in seeds]
+        means[name] = np.mean(rewards)
+    assert means["random"] < means["fcfs"] < means["heuristic"], means
+
+
+def test_the_same_controller_runs_through_both_apis():
+    aec = run_aec_episode(vertiport_v0.env(config="paper", **{"schedule.episode_steps": 200}),
+                          make_controller("heuristic"), 5)
+    gym = run_gym_episode(VertiportEnv(config="paper", **{"schedule.episode_steps": 200}),
+                          make_controller("heuristic"), 5)
+    assert aec == gym
+
+
+def test_illegal_action_from_a_controller_is_named():
+    class Stubborn:
+        name = "stubborn"
+
+        def act(self, observation):
+            return 13  # avoid collision: illegal for a parked vehicle
+
+    env = vertiport_v0.env()
+    with pytest.raises(ValueError, match=r"'stubborn' returned the illegal action 13 for evtol_0"):
+        run_aec_episode(env, Stubborn(), 0)
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("fcsf", "unknown agent 'fcsf'"),
+    ("no_such_module:Thing", "cannot import module 'no_such_module'"),
+    ("agents.fcfs:NoSuchClass", "has no attribute 'NoSuchClass'"),
+    ("agents.seeds:EVAL_SEED_BASE", "has no act"),
+])
+def test_bad_agent_specs(spec, message):
+    with pytest.raises(AgentSpecError, match=message):
+        make_controller(spec)
