@@ -117,7 +117,7 @@ class EpisodeMetrics:
     def summary(self, delay_min_per_vehicle: np.ndarray) -> dict[str, Any]:
         return {
             "steps": self.steps,
-            "total_reward": self.total_reward,
+            "total_reward": float(self.total_reward),
             "mean_battery_pct": self.battery_sum / max(self.steps, 1),
             "good_takeoffs": self.good_takeoffs,
             "good_landings": self.good_landings,

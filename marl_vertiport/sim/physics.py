@@ -19,7 +19,31 @@ import os
 import warnings
 
 import numpy as np
-import pybullet as p
+
+
+def _import_pybullet_quietly():
+    """pybullet prints its build time from C on import; keep it out of stdout (tables, CSV
+    piped from the CLI)."""
+    import sys
+
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:  # no usable stdout file descriptor
+        import pybullet
+
+        return pybullet
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            import pybullet
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    return pybullet
+
+
+p = _import_pybullet_quietly()
 
 #: Body colours (RGBA) used for rendering, cycled over the fleet.
 VEHICLE_COLOURS = (

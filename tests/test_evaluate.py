@@ -1,0 +1,285 @@
+"""The evaluation command (agents/evaluate.py) on tiny budgets: outputs, determinism across
+worker counts and reruns, bootstrap intervals, bad input (exit 2), an agent that turns illegal
+mid-run (exit 1, partial results kept), and the Markdown report."""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents import evaluate as ev
+from agents.base import Controller
+from agents.seeds import EVAL_SEEDS
+
+ROOT = Path(__file__).resolve().parents[1]
+# The controllers below are loaded by import path (``tests.test_evaluate:...``), also in spawned
+# workers, which inherit this process's sys.path: make sure the repository root is on it.
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+STEPS = 40
+TINY = ["--set", f"schedule.episode_steps={STEPS}", "--no-progress"]
+EPISODES = 3
+AGENTS = ["random", "tests.test_evaluate:FirstLegal"]
+METRICS = ["steps", "total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
+           "takeoffs", "failed_takeoffs", "landings", "mean_delay_min", "collisions",
+           "avoided_conflicts", "separation_losses", "contacts", "battery_depletions",
+           "completed_trips"]
+
+
+class FirstLegal(Controller):
+    """Deterministic: always the lowest-numbered legal action."""
+
+    name = "first_legal"
+
+    def act(self, observation: dict) -> int:
+        return int(np.flatnonzero(observation["action_mask"])[0])
+
+
+class IllegalAfterK(Controller):
+    """Legal for the first ``K`` calls made in this process (counted over all instances), then
+    an out-of-range action. With STEPS-step days, the first day completes and the second fails."""
+
+    name = "illegal_after_k"
+    K = STEPS + STEPS // 2
+    calls = 0
+
+    def act(self, observation: dict) -> int:
+        type(self).calls += 1
+        mask = observation["action_mask"]
+        if type(self).calls > self.K:
+            return len(mask)  # no such action
+        return int(np.flatnonzero(mask)[0])
+
+
+def _run(tmp: Path, *extra: str, agents=AGENTS, workers: int = 1, episodes: int = EPISODES,
+         report: Path | None = None) -> int:
+    argv = ["--agents", *agents, "--episodes", str(episodes), "--workers", str(workers),
+            "--out", str(tmp), *TINY, *extra]
+    if report is not None:
+        argv += ["--report", str(report)]
+    return ev.main(argv)
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def serial_run(tmp_path_factory):
+    """One complete tiny run, in-process (--workers 1), with a report in a sibling folder."""
+    base = tmp_path_factory.mktemp("eval")
+    out, report = base / "out", base / "docs" / "results.md"
+    rc = _run(out, report=report)
+    return rc, out, report
+
+
+def test_cli_writes_every_output(serial_run, capsys):
+    rc, out, _ = serial_run
+    assert rc == 0
+    for name in ("episodes.csv", "summary.csv", "results.json", "case_study.png",
+                 "action_distribution.png"):
+        assert (out / name).is_file(), name
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+    episodes = _rows(out / "episodes.csv")
+    assert list(episodes[0]) == ["agent", "config", "episode", "seed", *METRICS]
+    assert len(episodes) == len(AGENTS) * 2 * EPISODES
+    keys = [(r["agent"], r["config"], int(r["episode"])) for r in episodes]
+    assert keys == [(a, c, k) for a in AGENTS for c in ("paper", "paper_uncertain")
+                    for k in range(EPISODES)]
+    assert all(int(r["seed"]) == EVAL_SEEDS[int(r["episode"])] for r in episodes)
+    assert all(int(r["steps"]) == STEPS for r in episodes)
+
+    summary = _rows(out / "summary.csv")
+    assert list(summary[0]) == ["agent", "config", "metric", "mean", "std", "ci_low", "ci_high",
+                                "n"]
+    assert len(summary) == len(AGENTS) * 2 * len(METRICS)
+    assert all(int(r["n"]) == EPISODES for r in summary)
+
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["complete"] is True and doc["error"] is None
+    assert doc["settings"]["seeds"] == list(EVAL_SEEDS[:EPISODES])
+    assert doc["settings"]["overrides"] == {"schedule.episode_steps": STEPS}
+    assert doc["settings"]["bootstrap"]["resamples"] == 2000
+    names = doc["action_names"]["paper"]
+    assert names[:3] == ["stay", "takeoff", "normal_port_0"]
+    assert names[-2:] == ["continue", "avoid_collision"]
+    first = doc["episodes"][0]["metrics"]
+    assert len(first["action_counts"]) == len(names)
+    assert sum(first["action_counts"]) == STEPS
+    assert len(doc["summary"]) == len(summary)
+
+    for name in ("case_study.png", "action_distribution.png"):
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def test_summary_matches_episodes(serial_run):
+    _, out, _ = serial_run
+    episodes = _rows(out / "episodes.csv")
+    for row in _rows(out / "summary.csv"):
+        values = [float(e[row["metric"]]) for e in episodes
+                  if (e["agent"], e["config"]) == (row["agent"], row["config"])]
+        assert float(row["mean"]) == pytest.approx(np.mean(values))
+        assert float(row["std"]) == pytest.approx(np.std(values, ddof=1))
+        assert float(row["ci_low"]) <= float(row["mean"]) <= float(row["ci_high"])
+
+
+def test_same_numbers_with_two_workers_and_on_rerun(serial_run, tmp_path):
+    _, out, _ = serial_run
+    assert _run(tmp_path / "w2", workers=2) == 0
+    assert _run(tmp_path / "rerun", workers=1) == 0
+    for other in (tmp_path / "w2", tmp_path / "rerun"):
+        for name in ("episodes.csv", "summary.csv"):
+            assert (other / name).read_bytes() == (out / name).read_bytes(), (other, name)
+        a = json.loads((out / "results.json").read_text())
+        b = json.loads((other / "results.json").read_text())
+        for key in ("settings", "episodes", "summary", "action_names", "complete"):
+            assert a[key] == b[key], key
+
+
+def test_bootstrap_ci_contains_mean_and_is_reproducible():
+    x = np.random.default_rng(7).exponential(3.0, size=25)
+    first = ev.describe(x)
+    assert first == ev.describe(x)
+    assert first["ci_low"] < first["mean"] < first["ci_high"]
+    assert first["std"] == pytest.approx(np.std(x, ddof=1))
+    assert first["n"] == 25
+    assert ev.bootstrap_ci(x, seed=1) != ev.bootstrap_ci(x, seed=0)
+    narrow = ev.bootstrap_ci(x, confidence=0.5)
+    assert first["ci_low"] < narrow[0] < narrow[1] < first["ci_high"]
+    assert ev.describe([4.0]) == {"mean": 4.0, "std": 0.0, "ci_low": 4.0, "ci_high": 4.0, "n": 1}
+    assert ev.bootstrap_ci([0.1] * 9) == (0.1, 0.1)
+
+
+def test_unknown_agent_exits_2_before_running(tmp_path, capsys):
+    rc = _run(tmp_path / "out", agents=["random", "no_such_agent"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "no_such_agent" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("tests.no_such_module:Thing", ["tests.no_such_module"]),
+    ("agents.random_agent:NoSuchController", ["agents.random_agent", "NoSuchController"]),
+])
+def test_broken_import_path_exits_2(tmp_path, capsys, spec, words):
+    rc = _run(tmp_path / "out", agents=[spec])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert all(w in err for w in words)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("extra, word", [
+    (["--set", "schedule.no_such_key=1"], "no_such_key"),
+    (["--set", "episode_steps"], "KEY=VALUE"),
+    (["--configs", "no_such_case"], "no_such_case"),
+    (["--episodes", "0"], "--episodes"),
+])
+def test_bad_config_or_options_exit_2(tmp_path, capsys, extra, word):
+    assert _run(tmp_path / "out", *extra) == 2
+    assert word in capsys.readouterr().err
+
+
+def test_module_entry_point_exit_code(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "agents.evaluate", "--agents", "nobody",
+                           "--out", str(tmp_path / "out")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "nobody" in proc.stderr
+
+
+def test_help_lists_every_option(capsys):
+    with pytest.raises(SystemExit) as exc:
+        ev.main(["--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    for option in ("--agents", "--configs", "--episodes", "--workers", "--out", "--report",
+                   "--set", "--bootstrap", "--bootstrap-seed", "--no-progress"):
+        assert option in text
+
+
+def _illegal_agent_class():
+    return importlib.import_module("tests.test_evaluate").IllegalAfterK
+
+
+def test_illegal_action_exits_1_and_keeps_completed_episodes(tmp_path, capsys):
+    _illegal_agent_class().calls = 0
+    spec = "tests.test_evaluate:IllegalAfterK"
+    out = tmp_path / "out"
+    rc = _run(out, agents=["random", spec], report=tmp_path / "report.md")
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert spec in err and "'paper'" in err and str(EVAL_SEEDS[1]) in err
+    rows = _rows(out / "episodes.csv")
+    # random's 6 episodes, then the failing agent's first day of case 1.
+    assert [(r["agent"], r["config"], r["episode"]) for r in rows][-1] == (spec, "paper", "0")
+    assert len(rows) == 2 * EPISODES + 1
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["complete"] is False
+    assert spec in doc["error"] and str(EVAL_SEEDS[1]) in doc["error"]
+    assert len(doc["episodes"]) == len(rows)
+    assert not (out / "case_study.png").exists() and not (tmp_path / "report.md").exists()
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_illegal_action_with_workers_keeps_finished_episodes(tmp_path, capsys):
+    # Each spawned worker counts its own calls: both finish one day, then fail.
+    out = tmp_path / "out"
+    rc = _run(out, agents=["tests.test_evaluate:IllegalAfterK"], workers=2,
+              episodes=4)
+    assert rc == 1
+    assert "IllegalAfterK" in capsys.readouterr().err
+    rows = _rows(out / "episodes.csv")
+    assert 1 <= len(rows) < 8
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["complete"] is False and len(doc["episodes"]) == len(rows)
+
+
+def test_report_has_tables_and_image_links(serial_run):
+    _, out, report = serial_run
+    text = report.read_text()
+    assert "python -m agents.evaluate" in text and f"EVAL_SEEDS[:{EPISODES}]" in text
+    assert "## paper (case 1, no uncertainty)" in text
+    assert "## paper_uncertain (case 2, with uncertainty)" in text
+    assert text.count("| metric | random | FirstLegal |") == 2
+    assert "| total reward |" in text and "| collisions |" in text
+    for name in ("case_study.png", "action_distribution.png"):
+        rel = os.path.relpath(out / name, report.parent)
+        assert f"]({Path(rel).as_posix()})" in text
+        assert (report.parent / rel).is_file()
+
+
+def test_atomic_write_keeps_old_file_on_failure(tmp_path, monkeypatch):
+    path = tmp_path / "episodes.csv"
+    ev._atomic_write(path, "old\n")
+
+    def broken_replace(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(ev.os, "replace", broken_replace)
+    with pytest.raises(OSError):
+        ev._atomic_write(path, "new\n")
+    assert path.read_text() == "old\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["episodes.csv"]
+
+
+def test_parse_overrides():
+    assert ev.parse_overrides(["schedule.episode_steps=60", "uncertainty.wind_gust_prob=0.1",
+                               "layout.hover_spots_xy_m=[[1, 2]]"]) == (
+        ("schedule.episode_steps", 60), ("uncertainty.wind_gust_prob", 0.1),
+        ("layout.hover_spots_xy_m", [[1, 2]]))
+    with pytest.raises(ev.InputError):
+        ev.parse_overrides(["no_equals_sign"])

@@ -1,0 +1,217 @@
+"""The episode renderer (agents/render.py): CLI output, overlay, label placement, errors."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image, ImageSequence
+
+from agents import render
+from agents.random_agent import RandomController
+from marl_vertiport import vertiport_v0
+from marl_vertiport.render import render_frame
+from marl_vertiport.sim.core import AWAY
+from marl_vertiport.sim.physics import VEHICLE_COLOURS
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _gif(path):
+    im = Image.open(path)
+    frames = [f.convert("RGB") for f in ImageSequence.Iterator(im)]
+    return im, frames
+
+
+@pytest.fixture
+def env():
+    e = vertiport_v0.env(config="paper", render_mode="rgb_array")
+    yield e
+    e.close()
+
+
+def _advance(env, steps, seed=7):
+    """Reset and take ``steps`` random legal steps; returns the simulator."""
+    env.reset(seed=seed)
+    policy = RandomController(seed)
+    for _ in range(steps):
+        obs = env.observe(env.agent_selection)
+        env.step(policy.act(obs))
+    return env.unwrapped.sim
+
+
+def test_cli_writes_gif_with_expected_frames_and_size(tmp_path, capsys):
+    out = tmp_path / "sub" / "tiny.gif"  # the folder is created
+    rc = render.main(["--agent", "random", "--minutes", "6", "--size", "320x240", "--fps", "5",
+                      "--out", str(out), "--no-progress"])
+    assert rc == 0
+    im, frames = _gif(out)
+    assert len(frames) == 6
+    assert im.size == (320, 240)
+    assert im.info.get("duration") == 200
+    assert all(np.asarray(f).std() > 10 for f in frames)  # not blank
+    assert not any(frames[0].tobytes() == f.tobytes() for f in frames[1:])  # the clock moves
+    assert sorted(p.name for p in out.parent.iterdir()) == ["tiny.gif"]  # no temp file left
+    assert "wrote" in capsys.readouterr().err
+
+
+def test_cli_every_and_start_minute(tmp_path):
+    out = tmp_path / "every.gif"
+    rc = render.main(["--agent", "random", "--start-minute", "1430", "--minutes", "30",
+                      "--every", "3", "--size", "320x240", "--out", str(out), "--no-progress"])
+    assert rc == 0
+    # The day ends at minute 1440: 10 steps recorded, a frame after every third -> 4 frames.
+    _, frames = _gif(out)
+    assert len(frames) == 4
+
+
+def test_overlay_is_drawn_over_the_raw_render(env):
+    sim = _advance(env, 25)
+    comp = render.FrameComposer(sim, 320, 240)
+    raw_view = comp.raw_view()
+    frame = np.asarray(comp.compose(step_reward=1.0))
+    assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
+    # The panel region holds the overlay, not the raw render of the same size.
+    raw_full = render_frame(sim, 320, 240)
+    panel = frame[:, comp.view_w:]
+    assert np.abs(panel.astype(int) - raw_full[:, comp.view_w:].astype(int)).sum(axis=2).mean() > 30
+    assert len(np.unique(panel.reshape(-1, 3), axis=0)) > 20  # text, bars, colours
+    # The 3-D view is the raw render with labels on it: mostly the same pixels, some changed.
+    view = frame[:, : comp.view_w]
+    ground = (raw_view != 255).any(axis=2)  # the sky is recoloured
+    changed = (view != raw_view).any(axis=2) & ground
+    assert 0.002 < changed.mean() < 0.3
+
+
+def test_labels_sit_on_the_vehicles(env):
+    """The projection used for labels matches TinyRenderer's: each visible body's colour is
+    at its projected centre."""
+    sim = _advance(env, 3)
+    comp = render.FrameComposer(sim, 400, 300)
+    raw = comp.raw_view().astype(float)
+    px = comp.camera.project(sim.pos)
+    palette = np.array([c[:3] for c in VEHICLE_COLOURS[: sim.n]], dtype=float)
+    palette /= np.linalg.norm(palette, axis=1, keepdims=True)
+    checked = 0
+    for v in range(sim.n):
+        if sim.status[v] == AWAY:
+            continue
+        x, y = np.round(px[v]).astype(int)
+        rgb = raw[y, x] / max(np.linalg.norm(raw[y, x]), 1e-9)
+        sim_to = palette @ rgb
+        assert int(np.argmax(sim_to)) == v and sim_to[v] > 0.97, (v, raw[y, x])
+        checked += 1
+    assert checked >= 2
+
+
+def test_camera_fits_the_airspace(env):
+    sim = _advance(env, 0)
+    cam = render.fit_camera(sim, 400, 480)
+    r = sim.layout.airspace_radius_m
+    ang = np.linspace(0, 2 * np.pi, 36, endpoint=False)
+    ring = np.stack([r * np.cos(ang), r * np.sin(ang), np.zeros_like(ang)], axis=1)
+    px = cam.project(ring)
+    assert np.isfinite(px).all()
+    assert px[:, 0].min() >= 0 and px[:, 0].max() <= 400
+    assert px[:, 1].min() >= 0 and px[:, 1].max() <= 480
+    assert px[:, 0].max() - px[:, 0].min() > 0.7 * 400  # and fills most of the view
+
+
+def test_unknown_agent_exits_2_naming_it(tmp_path):
+    out = tmp_path / "x.gif"
+    proc = subprocess.run(
+        [sys.executable, "-m", "agents.render", "--agent", "no_such_agent_xyz", "--out", str(out)],
+        cwd=ROOT, capture_output=True, text=True, timeout=60,
+    )
+    assert proc.returncode == 2
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip() and "pybullet build time" not in ln]
+    assert len(lines) == 1 and "no_such_agent_xyz" in lines[0], proc.stderr
+    assert not out.exists()
+
+
+def test_unwritable_output_is_a_clear_error(tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    rc = render.main(["--agent", "random", "--minutes", "1", "--out", str(blocker / "x.gif"),
+                      "--no-progress"])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "cannot write output" in err and "x.gif" in err
+    rc = render.main(["--agent", "random", "--out", str(tmp_path), "--no-progress"])
+    assert rc == 2
+    assert "use a .gif or .mp4" in capsys.readouterr().err
+
+
+def test_mp4_without_a_writer_is_a_clear_error(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(render, "_mp4_backend", lambda: None)
+    rc = render.main(["--agent", "random", "--out", str(tmp_path / "x.mp4"), "--no-progress"])
+    assert rc == 2
+    assert ".mp4 needs imageio-ffmpeg or av" in capsys.readouterr().err
+
+
+def test_bad_size_is_rejected(capsys):
+    with pytest.raises(SystemExit) as exc:
+        render.main(["--size", "640by480"])
+    assert exc.value.code == 2
+    assert "WIDTHxHEIGHT" in capsys.readouterr().err
+
+
+def test_help_documents_every_option(capsys):
+    with pytest.raises(SystemExit):
+        render.main(["--help"])
+    text = capsys.readouterr().out
+    for opt in ("--agent", "--config", "--seed", "--start-minute", "--minutes", "--every",
+                "--fps", "--size", "--out"):
+        assert opt in text
+
+
+def test_hhmm():
+    assert render.hhmm(0) == "00:00"
+    assert render.hhmm(605.0) == "10:05"
+    assert render.hhmm(1440) == "24:00"
+
+
+def test_mp4_when_a_writer_is_installed(tmp_path):
+    if render._mp4_backend() is None:
+        pytest.skip("no MP4 writer (imageio-ffmpeg or av) installed")
+    out = tmp_path / "x.mp4"
+    assert render.main(["--agent", "random", "--minutes", "4", "--size", "320x240",
+                        "--out", str(out), "--no-progress"]) == 0
+    assert out.stat().st_size > 0
+
+
+def test_outcome_words():
+    assert render.FrameComposer._outcomes({"action": 1, "takeoff": True, "good_takeoff": True})[0][0].endswith("take-off ok")
+    words = [w for w, _ in render.FrameComposer._outcomes(
+        {"action": 13, "commanded_action": 12, "conflict": True, "reward_terms": {"safety": -5.0}})]
+    assert words == ["\u2717 conflict", "misread"]
+
+
+def test_rendering_does_not_change_the_episode():
+    """The recorded episode is the evaluated one: same seed, same steps, same metrics."""
+    def run(with_frames):
+        e = vertiport_v0.env(config="paper", render_mode="rgb_array")
+        try:
+            if with_frames:
+                frames = render.record_episode(
+                    e, RandomController(), 11, lambda s: render.FrameComposer(s, 320, 240),
+                    start_step=20, n_steps=10, every=2, progress=False)
+                assert len(frames) == 5
+            else:
+                e.reset(seed=11)
+                policy = RandomController()
+                policy.reset(seed=11)
+                for _ in range(29):
+                    e.step(policy.act(e.observe(e.agent_selection)))
+            sim = e.unwrapped.sim
+            return sim.step_count, sim.metrics.total_reward, sim.pos.copy(), sim.battery.copy()
+        finally:
+            e.close()
+
+    a, b = run(True), run(False)
+    assert a[0] == b[0] == 29
+    assert a[1] == b[1]
+    np.testing.assert_array_equal(a[2], b[2])
+    np.testing.assert_array_equal(a[3], b[3])
