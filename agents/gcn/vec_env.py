@@ -1,0 +1,218 @@
+"""rsl_rl ``VecEnv`` adapters over ``K`` copies of the vertiport, for the two training modes.
+
+Observation groups (a flat TensorDict with a leading row dimension):
+
+- ``port_nodes (R, P, 4)``, ``evtol_nodes (R, N, 13)``, ``self (R, 11)``, ``action_mask (R, A)``
+  bool: the observation of the eVTOL a row acts for;
+- multi-agent mode only: ``state_port_nodes (R, P, 5)``, ``state_evtol_nodes (R, N, 17)``,
+  ``state_clock (R, 3)``: the global ``state()`` with ``is_self`` marking the row's eVTOL, for
+  the centralised critic.
+
+**Multi-agent** (:class:`MultiAgentVecEnv`, CTDE): the PettingZoo AEC env, one row per (copy,
+eVTOL), ``R = K * N``. Each step every copy advances one AEC step: the acting eVTOL's row acts
+on its own observation; the other rows of that copy get a mask with only "stay" legal, their
+action is ignored (probability 1, so no policy gradient) and their reward is 0. Each row's
+return is therefore that eVTOL's own reward stream, and its value is judged by the critic on the
+global state. supersuit's vector wrappers need parallel envs with every agent acting each step;
+the turn-based AEC env is stepped here directly, in process.
+
+**Single agent** (:class:`SingleAgentVecEnv`, fully centralised): the Gymnasium env vectorised
+with supersuit (``gym_vec_env_v0``; with ``num_cpus > 1`` copies run in worker processes via
+``concat_vec_envs_v1``), one row per copy, ``R = K``; actor and critic both see the acting
+eVTOL's (centralised) observation. Gymnasium's vector envs reset a finished copy on the step
+after its truncation, so one transition in 1440 per copy carries no reward.
+
+Both report truncations as ``extras["time_outs"]`` (with ``dones``) and, when episodes end, their
+metrics in ``extras["episode"]``. Buffers are allocated once; every step returns fresh tensors
+(rsl_rl keeps a reference to the observation it acted on).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from agents.seeds import training_seed
+from marl_vertiport.config import EnvConfig, load_config
+from marl_vertiport.sim.core import EVTOL_FEATURES, SELF_FEATURES
+
+#: Episode metrics logged by rsl_rl (averaged over the episodes that end in an iteration).
+LOGGED_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
+                  "mean_delay_min", "collisions", "separation_losses", "battery_depletions")
+POLICY_GROUPS = ("port_nodes", "evtol_nodes", "self")
+STATE_GROUPS = ("state_port_nodes", "state_evtol_nodes", "state_clock")
+
+
+class _VertiportVecEnv(VecEnv):
+    """What both adapters share: config, row bookkeeping, action conversion, episode extras."""
+
+    def __init__(self, config: str | EnvConfig, num_envs: int, rows_per_env: int,
+                 device: str = "cpu", seed: int = 0) -> None:
+        self.env_config = load_config(config)
+        self.num_copies = int(num_envs)
+        self.rows_per_env = rows_per_env
+        self.num_envs = self.num_copies * rows_per_env
+        self.num_actions = 1
+        self.max_episode_length = self.env_config.schedule.episode_steps
+        self.device = torch.device(device)
+        self.cfg = {"env_config": self.env_config.name, "num_copies": self.num_copies}
+        self.episode_length_buf = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
+        self._seed = seed
+        self._episodes_started = 0
+
+    def _next_seed(self) -> int:
+        seed = training_seed(self._seed * 100_003 + self._episodes_started)
+        self._episodes_started += 1
+        return seed
+
+    def _to_int_actions(self, actions: torch.Tensor) -> np.ndarray:
+        return actions.detach().reshape(-1).round().long().cpu().numpy()
+
+    def _episode_extras(self, finished: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
+        return {key: torch.tensor([float(m[key]) for m in finished]) for key in LOGGED_METRICS}
+
+    def _tensors(self, arrays: dict[str, np.ndarray]) -> TensorDict:
+        data = {k: torch.from_numpy(v.copy()).to(self.device) for k, v in arrays.items()}
+        data["action_mask"] = data["action_mask"].bool()
+        return TensorDict(data, batch_size=[self.num_envs], device=self.device)
+
+
+class MultiAgentVecEnv(_VertiportVecEnv):
+    """One row per (env copy, eVTOL); see the module docstring."""
+
+    def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
+                 seed: int = 0) -> None:
+        from marl_vertiport.vertiport_v0 import raw_env
+
+        cfg = load_config(config)
+        super().__init__(cfg, num_envs, cfg.fleet_size, device, seed)
+        self.envs = [raw_env(config=cfg) for _ in range(self.num_copies)]
+        for env in self.envs:
+            env.reset(seed=self._next_seed())
+        sim = self.envs[0].sim
+        n, p, a = sim.n, sim.layout.n_nodes, sim.actions.n
+        k = self.num_copies
+        st = self.envs[0].state()
+        self._buf = {
+            "port_nodes": np.zeros((k, n, p, 4), np.float32),
+            "evtol_nodes": np.zeros((k, n, n, 13), np.float32),
+            "self": np.zeros((k, n, 11), np.float32),
+            "action_mask": np.zeros((k, n, a), np.int8),
+            "state_port_nodes": np.zeros((k, n) + st["port_nodes"].shape, np.float32),
+            "state_evtol_nodes": np.zeros((k, n) + st["evtol_nodes"].shape, np.float32),
+            "state_clock": np.zeros((k, n) + st["clock"].shape, np.float32),
+        }
+        self._noop_mask = np.zeros(a, np.int8)
+        self._noop_mask[sim.actions.stay] = 1
+        self._eye = np.eye(n, dtype=np.float32)
+        self._is_self = EVTOL_FEATURES.index("is_self")
+        self._n_self = len(SELF_FEATURES)
+        self._obs = self._observe_all()
+
+    def _observe_copy(self, k: int) -> None:
+        env, buf = self.envs[k], self._buf
+        sim = env.sim
+        buf["port_nodes"][k] = sim.port_nodes()
+        base = sim._evtol_base()
+        evtol = buf["evtol_nodes"][k]
+        evtol[:] = base
+        evtol[:, :, self._is_self] = self._eye
+        buf["self"][k] = base[:, : self._n_self]
+        masks = buf["action_mask"][k]
+        masks[:] = self._noop_mask
+        masks[sim.acting] = sim.action_mask(sim.acting)
+        state = sim.state_arrays()
+        buf["state_port_nodes"][k] = state["port_nodes"]
+        st_evtol = buf["state_evtol_nodes"][k]
+        st_evtol[:] = state["evtol_nodes"]
+        st_evtol[:, :, self._is_self] = self._eye
+        buf["state_clock"][k] = state["clock"]
+
+    def _observe_all(self) -> TensorDict:
+        for k in range(self.num_copies):
+            self._observe_copy(k)
+        flat = {key: v.reshape((self.num_envs,) + v.shape[2:]) for key, v in self._buf.items()}
+        return self._tensors(flat)
+
+    def get_observations(self) -> TensorDict:
+        return self._obs.clone()
+
+    def step(self, actions: torch.Tensor):
+        acts = self._to_int_actions(actions).reshape(self.num_copies, self.rows_per_env)
+        rewards = np.zeros((self.num_copies, self.rows_per_env), np.float32)
+        dones = np.zeros_like(rewards, dtype=bool)
+        finished = []
+        for k, env in enumerate(self.envs):
+            v = env.sim.acting
+            env.step(int(acts[k, v]))
+            rewards[k, v] = env.rewards[env.possible_agents[v]]
+            if env.sim.truncated:
+                finished.append(env.sim.episode_metrics())
+                dones[k] = True
+                env.reset(seed=self._next_seed())
+        dones_t = torch.from_numpy(dones.reshape(-1)).to(self.device)
+        self.episode_length_buf += 1
+        self.episode_length_buf[dones_t] = 0
+        self._obs = self._observe_all()
+        extras: dict[str, Any] = {"time_outs": dones_t.clone()}
+        if finished:
+            extras["episode"] = self._episode_extras(finished)
+        return (self._obs.clone(), torch.from_numpy(rewards.reshape(-1)).to(self.device),
+                dones_t.long(), extras)
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+class SingleAgentVecEnv(_VertiportVecEnv):
+    """One row per env copy, vectorised with supersuit; see the module docstring."""
+
+    def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
+                 seed: int = 0, num_cpus: int = 1) -> None:
+        import supersuit as ss
+
+        from marl_vertiport.gym_env import VertiportEnv
+
+        cfg = load_config(config)
+        super().__init__(cfg, num_envs, 1, device, seed)
+        if num_cpus > 1:
+            if self.num_copies % num_cpus:
+                raise ValueError(f"num_envs ({num_envs}) must be a multiple of num_cpus ({num_cpus})")
+            inner = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies // num_cpus)
+            self.venv = ss.concat_vec_envs_v1(inner, num_cpus, num_cpus=num_cpus)
+        else:
+            self.venv = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies)
+        obs, _ = self.venv.reset(seed=self._next_seed())
+        self._obs = self._convert(obs)
+
+    def _convert(self, obs: dict) -> TensorDict:
+        inner = obs["observation"]
+        return self._tensors({"port_nodes": inner["port_nodes"], "evtol_nodes": inner["evtol_nodes"],
+                              "self": inner["self"], "action_mask": obs["action_mask"]})
+
+    def get_observations(self) -> TensorDict:
+        return self._obs.clone()
+
+    def step(self, actions: torch.Tensor):
+        obs, rewards, terminated, truncated, info = self.venv.step(self._to_int_actions(actions))
+        done = np.logical_or(terminated, truncated)
+        dones_t = torch.from_numpy(done).to(self.device)
+        self.episode_length_buf += 1
+        self.episode_length_buf[dones_t] = 0
+        self._obs = self._convert(obs)
+        extras: dict[str, Any] = {"time_outs": torch.from_numpy(np.asarray(truncated)).to(self.device)}
+        if done.any() and "episode" in info:
+            ep = info["episode"]
+            rows = np.flatnonzero(done)
+            extras["episode"] = {k: torch.as_tensor(np.asarray(ep[k])[rows], dtype=torch.float32)
+                                 for k in LOGGED_METRICS}
+        return (self._obs.clone(), torch.as_tensor(rewards, dtype=torch.float32, device=self.device),
+                dones_t.long(), extras)
+
+    def close(self) -> None:
+        self.venv.close()
