@@ -13,7 +13,7 @@ AGENTS   ?= random fcfs heuristic
 EPISODES ?= 50
 AGENT    ?= heuristic
 
-.PHONY: help venv test test-fast train evaluate results render env-demo clean
+.PHONY: help venv test test-fast train evaluate results render bench env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-10s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -37,9 +37,11 @@ test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward
 test-fast: $(STAMP)  ## the test suite without the full-episode tests
 	$(PY) -m pytest -q -m "not slow"
 
-train: $(STAMP)  ## train on the default config (CONFIG=..., RESUME=<run>)
-	@if [ -f agents/train.py ]; then $(PY) -m agents.train --config $(CONFIG) $(if $(RESUME),--resume $(RESUME)); \
-	else $(PY) -m marl_vertiport.cli demo --config $(CONFIG); fi
+# CONFIG names an env config elsewhere; for `train` it names a train config when given.
+TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
+
+train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>)
+	$(PY) -m agents.train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG))
 
 evaluate: $(STAMP)  ## evaluate AGENTS on both cases, EPISODES per case (JSON, CSV, figures in runs/eval)
 	$(PY) -m agents.evaluate --agents $(AGENTS) --episodes $(EPISODES) --out runs/eval
@@ -49,6 +51,9 @@ results: $(STAMP)  ## regenerate docs/results.md and its figures (50 episodes pe
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
 	$(PY) -m agents.render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif
+
+bench: $(STAMP)  ## measure env, physics, vector, inference and training speed (docs/performance.md)
+	$(PY) -m agents.bench --out runs/bench --report docs/performance.md
 
 env-demo: $(STAMP)  ## run one day of the env with random legal actions and print its metrics
 	$(PY) -m marl_vertiport.cli demo --config $(CONFIG)

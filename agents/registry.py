@@ -1,10 +1,15 @@
-"""Controllers by name or import path: ``random``, ``fcfs``, ``heuristic``, or
-``package.module:Class`` (a class built with no arguments, or a ready object)."""
+"""Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``, ``gcn``
+(the shipped trained policy), ``package.module:Class`` (a class built with no arguments, or a
+ready object), or the path of a training checkpoint (``.pt``)."""
 
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 from typing import Any
+
+#: The trained policy shipped with the repository (see agents/checkpoints/README.md).
+SHIPPED_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "gcn_default.pt"
 
 #: Built-in controllers: name -> import path.
 BUILTIN = {
@@ -43,13 +48,21 @@ def make_controller(spec: str) -> Any:
     Raises:
         AgentSpecError: unknown name, import failure, or an object without ``act``.
     """
+    if spec == "gcn" or spec.endswith(".pt"):
+        from agents.gcn.policy import CheckpointError, GCNController
+
+        path = SHIPPED_CHECKPOINT if spec == "gcn" else Path(spec)
+        try:
+            return GCNController(path)
+        except CheckpointError as exc:
+            raise AgentSpecError(f"agent {spec!r}: {exc}") from exc
     if spec in BUILTIN:
         target = _import(BUILTIN[spec], spec)
     elif ":" in spec:
         target = _import(spec, spec)
     else:
-        raise AgentSpecError(f"unknown agent {spec!r}: use one of {sorted(BUILTIN)} or an import "
-                             "path 'package.module:Class'")
+        raise AgentSpecError(f"unknown agent {spec!r}: use one of {sorted(BUILTIN) + ['gcn']}, an "
+                             "import path 'package.module:Class' or a checkpoint path ending in .pt")
     controller = target() if isinstance(target, type) else target
     if not callable(getattr(controller, "act", None)):
         raise AgentSpecError(f"agent {spec!r}: {controller!r} has no act(observation) method")

@@ -329,6 +329,12 @@ def _build(cls: type, data: Any, where: str) -> Any:
     return cls(**kwargs)
 
 
+def build_dataclass(cls: type, data: Any, where: str = "") -> Any:
+    """Build any (nested) frozen dataclass schema from plain data with the same checks as the
+    env config: unknown keys and wrong types fail with the field named."""
+    return _build(cls, data, where)
+
+
 def from_dict(data: dict[str, Any]) -> EnvConfig:
     """Build and validate an :class:`EnvConfig` from plain data (as loaded from YAML)."""
     return _build(EnvConfig, data, "")

@@ -33,3 +33,18 @@ def busy_action(obs: dict, rng: np.random.Generator) -> int:
         choice = free_chargers if free_chargers.size else free_ports
         return int(choice[0]) if choice.size else STAY
     return int(legal[0]) if legal.size == 1 else len(mask) - 2  # continue in transit
+
+
+def seed0_sim(**overrides):
+    """The paper config after ``reset(default_rng(0))``, whose placement the hand-computed tests
+    rely on: evtol_0 on the charging port (node 2), evtol_1 on normal port 1, evtol_2 on normal
+    port 0, evtol_3 at hover spot 7; take-offs at minutes 16, 15, 13, evtol_3's landing at 15."""
+    from marl_vertiport.config import load_config
+    from marl_vertiport.sim.core import VertiportSim
+
+    sim = VertiportSim(load_config("paper", **overrides))
+    sim.reset(np.random.default_rng(0))
+    assert sim.status.tolist() == [ON_CHARGER, ON_PORT, ON_PORT, HOVERING]
+    assert sim.node.tolist() == [2, 1, 0, 7]
+    assert sim.pending_time.tolist() == [16, 15, 13, 15]
+    return sim

@@ -147,3 +147,16 @@ def test_illegal_action_from_a_controller_is_named():
 def test_bad_agent_specs(spec, message):
     with pytest.raises(AgentSpecError, match=message):
         make_controller(spec)
+
+
+def test_custom_agent_example_runs(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    out = subprocess.run([sys.executable, "examples/custom_agent.py", "1"], cwd=root,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "one day:" in out.stdout and "ChargeFirst" in out.stdout
+    assert (root / "runs" / "eval_custom" / "results.json").exists()

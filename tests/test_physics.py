@@ -134,3 +134,33 @@ def test_engine_substeps_meet_the_physics_rate(rate_hz, expected):
     sim = VertiportSim(load_config("paper", **{"flight.physics_rate_hz": rate_hz}))
     assert sim.physics.substeps == expected
     assert sim.physics.substeps / sim.dt_s >= rate_hz
+
+
+def test_copies_get_their_own_physics_world():
+    """supersuit clones envs with cloudpickle; copies must not share one pybullet client."""
+    import copy
+    import pickle
+
+    from marl_vertiport.gym_env import VertiportEnv
+
+    env = VertiportEnv()
+    env.reset(seed=4)
+    for _ in range(30):
+        env.step(env.action_space.sample())
+    twin = pickle.loads(pickle.dumps(env))
+    other = copy.deepcopy(env)
+    assert len({env.sim.physics.client, twin.sim.physics.client, other.sim.physics.client}) == 3
+    np.testing.assert_array_equal(twin.sim.pos, env.sim.pos)
+    # Stepping one copy leaves the others' bodies where they were.
+    before = twin.sim.pos.copy()
+    for _ in range(20):
+        env.step(env.action_space.sample())
+    np.testing.assert_array_equal(twin.sim.pos, before)
+    # A copy continues exactly like the original under the same actions.
+    a, b = pickle.loads(pickle.dumps(env)), env
+    for _ in range(50):
+        action = b.action_space.sample()
+        oa, ra, *_ = a.step(action)
+        ob, rb, *_ = b.step(action)
+        assert ra == rb
+        np.testing.assert_array_equal(oa["observation"]["evtol_nodes"], ob["observation"]["evtol_nodes"])

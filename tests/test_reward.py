@@ -15,6 +15,8 @@ import math
 import numpy as np
 import pytest
 
+from conftest import seed0_sim
+
 from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import (
     HOVERING, NO_OPERATION, ON_CHARGER, ON_PORT, PENDING_LANDING, TAXIING, VertiportSim,
@@ -25,12 +27,7 @@ TAKEOFF, CONTINUE, AVOID, STAY = 1, 12, 13, 0
 
 
 def new_sim(**overrides) -> VertiportSim:
-    sim = VertiportSim(load_config("paper", **overrides))
-    sim.reset(np.random.default_rng(0))
-    assert sim.status.tolist() == [ON_CHARGER, ON_PORT, ON_PORT, HOVERING]
-    assert sim.node.tolist() == [2, 1, 0, 7]
-    assert sim.pending_time.tolist() == [16, 15, 13, 15]
-    return sim
+    return seed0_sim(**overrides)
 
 
 def weighted(terms) -> float:

@@ -13,6 +13,8 @@ import math
 import numpy as np
 import pytest
 
+from conftest import seed0_sim
+
 from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import (
     ARRIVING, AWAY, DEPARTING, DELAYED, EARLY, HOVERING, NO_OPERATION, ON_CHARGER, ON_PORT,
@@ -24,12 +26,7 @@ STEP_M = 2.0
 
 
 def new_sim(**overrides) -> VertiportSim:
-    sim = VertiportSim(load_config("paper", **overrides))
-    sim.reset(np.random.default_rng(0))
-    assert sim.status.tolist() == [ON_CHARGER, ON_PORT, ON_PORT, HOVERING]
-    assert sim.node.tolist() == [2, 1, 0, 7]
-    assert sim.pending_time.tolist() == [16, 15, 13, 15]
-    return sim
+    return seed0_sim(**overrides)
 
 
 def act(sim, v, action, minute=None):

@@ -124,6 +124,7 @@ class _GraphModel(MLPModel):
         for i, module in enumerate(self.mlp):
             if isinstance(module, nn.LeakyReLU):
                 self.mlp[i] = nn.RReLU(0.1, 0.3)
+        self.train(self.training)  # fix the RReLU slopes from the start (see train())
 
     def train(self, mode: bool = True) -> _GraphModel:
         """RReLU draws random slopes in training mode, which would make the log-probabilities

@@ -11,14 +11,15 @@ Observation groups (a flat TensorDict with a leading row dimension):
 **Multi-agent** (:class:`MultiAgentVecEnv`, CTDE): the PettingZoo AEC env, one row per (copy,
 eVTOL), ``R = K * N``. Each step every copy advances one AEC step: the acting eVTOL's row acts
 on its own observation; the other rows of that copy get a mask with only "stay" legal, their
-action is ignored (probability 1, so no policy gradient) and their reward is 0. Each row's
-return is therefore that eVTOL's own reward stream, and its value is judged by the critic on the
-global state. supersuit's vector wrappers need parallel envs with every agent acting each step;
+action is ignored (probability 1, so no policy gradient). By default every row of a copy gets
+the reward of the step (the team reward: the eVTOLs cooperate toward the fleet's total, as the
+ATC does); with ``team_reward=False`` only the acting row gets it, so each row's return is that
+eVTOL's own reward stream. Values are judged by the critic on the global state. supersuit's vector wrappers need parallel envs with every agent acting each step;
 the turn-based AEC env is stepped here directly, in process.
 
 **Single agent** (:class:`SingleAgentVecEnv`, fully centralised): the Gymnasium env vectorised
-with supersuit (``gym_vec_env_v0``; with ``num_cpus > 1`` copies run in worker processes via
-``concat_vec_envs_v1``), one row per copy, ``R = K``; actor and critic both see the acting
+with supersuit (``gym_vec_env_v0``; with ``multiprocessing=True`` each copy runs in its own
+worker process), one row per copy, ``R = K``; actor and critic both see the acting
 eVTOL's (centralised) observation. Gymnasium's vector envs reset a finished copy on the step
 after its truncation, so one transition in 1440 per copy carries no reward.
 
@@ -63,6 +64,19 @@ class _VertiportVecEnv(VecEnv):
         self.episode_length_buf = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
         self._seed = seed
         self._episodes_started = 0
+        self._finished: list[dict[str, Any]] = []
+
+    def pop_episode_means(self) -> dict[str, float]:
+        """Mean metrics of the episodes finished since the last call (empty if none)."""
+        if not self._finished:
+            return {}
+        means = {k: float(np.mean([float(m[k]) for m in self._finished])) for k in LOGGED_METRICS}
+        self._finished = []
+        return means
+
+    def acting_rows(self) -> torch.Tensor:
+        """Rows whose action takes effect at the next step."""
+        return torch.arange(self.num_envs)
 
     def _next_seed(self) -> int:
         seed = training_seed(self._seed * 100_003 + self._episodes_started)
@@ -73,6 +87,7 @@ class _VertiportVecEnv(VecEnv):
         return actions.detach().reshape(-1).round().long().cpu().numpy()
 
     def _episode_extras(self, finished: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
+        self._finished.extend(finished)
         return {key: torch.tensor([float(m[key]) for m in finished]) for key in LOGGED_METRICS}
 
     def _tensors(self, arrays: dict[str, np.ndarray]) -> TensorDict:
@@ -85,11 +100,12 @@ class MultiAgentVecEnv(_VertiportVecEnv):
     """One row per (env copy, eVTOL); see the module docstring."""
 
     def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
-                 seed: int = 0) -> None:
+                 seed: int = 0, team_reward: bool = True) -> None:
         from marl_vertiport.vertiport_v0 import raw_env
 
         cfg = load_config(config)
         super().__init__(cfg, num_envs, cfg.fleet_size, device, seed)
+        self.team_reward = team_reward
         self.envs = [raw_env(config=cfg) for _ in range(self.num_copies)]
         for env in self.envs:
             env.reset(seed=self._next_seed())
@@ -141,6 +157,9 @@ class MultiAgentVecEnv(_VertiportVecEnv):
     def get_observations(self) -> TensorDict:
         return self._obs.clone()
 
+    def acting_rows(self) -> torch.Tensor:
+        return torch.tensor([k * self.rows_per_env + env.sim.acting for k, env in enumerate(self.envs)])
+
     def step(self, actions: torch.Tensor):
         acts = self._to_int_actions(actions).reshape(self.num_copies, self.rows_per_env)
         rewards = np.zeros((self.num_copies, self.rows_per_env), np.float32)
@@ -149,7 +168,11 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         for k, env in enumerate(self.envs):
             v = env.sim.acting
             env.step(int(acts[k, v]))
-            rewards[k, v] = env.rewards[env.possible_agents[v]]
+            reward = env.rewards[env.possible_agents[v]]
+            if self.team_reward:
+                rewards[k] = reward  # every eVTOL of the copy shares the fleet's reward
+            else:
+                rewards[k, v] = reward
             if env.sim.truncated:
                 finished.append(env.sim.episode_metrics())
                 dones[k] = True
@@ -173,20 +196,17 @@ class SingleAgentVecEnv(_VertiportVecEnv):
     """One row per env copy, vectorised with supersuit; see the module docstring."""
 
     def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
-                 seed: int = 0, num_cpus: int = 1) -> None:
+                 seed: int = 0, multiprocessing: bool = False) -> None:
         import supersuit as ss
 
         from marl_vertiport.gym_env import VertiportEnv
 
         cfg = load_config(config)
         super().__init__(cfg, num_envs, 1, device, seed)
-        if num_cpus > 1:
-            if self.num_copies % num_cpus:
-                raise ValueError(f"num_envs ({num_envs}) must be a multiple of num_cpus ({num_cpus})")
-            inner = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies // num_cpus)
-            self.venv = ss.concat_vec_envs_v1(inner, num_cpus, num_cpus=num_cpus)
-        else:
-            self.venv = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies)
+        # multiprocessing: one worker process per copy (gymnasium's AsyncVectorEnv with shared
+        # memory; supersuit's concat_vec_envs cannot concatenate nested Dict observations).
+        self.venv = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies,
+                                      multiprocessing=multiprocessing)
         obs, _ = self.venv.reset(seed=self._next_seed())
         self._obs = self._convert(obs)
 
@@ -209,10 +229,18 @@ class SingleAgentVecEnv(_VertiportVecEnv):
         if done.any() and "episode" in info:
             ep = info["episode"]
             rows = np.flatnonzero(done)
-            extras["episode"] = {k: torch.as_tensor(np.asarray(ep[k])[rows], dtype=torch.float32)
-                                 for k in LOGGED_METRICS}
+            extras["episode"] = self._episode_extras(
+                [{k: np.asarray(ep[k])[r] for k in LOGGED_METRICS} for r in rows])
         return (self._obs.clone(), torch.as_tensor(rewards, dtype=torch.float32, device=self.device),
                 dones_t.long(), extras)
 
     def close(self) -> None:
         self.venv.close()
+
+
+def observation_of_row(obs: TensorDict, row: int) -> dict:
+    """The observation of one row as the envs give it (for controllers such as the dispatcher)."""
+    return {"observation": {"port_nodes": obs["port_nodes"][row].numpy(),
+                            "evtol_nodes": obs["evtol_nodes"][row].numpy(),
+                            "self": obs["self"][row].numpy()},
+            "action_mask": obs["action_mask"][row].numpy().astype(np.int8)}

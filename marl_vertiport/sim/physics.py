@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 import warnings
 
 import numpy as np
@@ -37,10 +38,21 @@ def _import_pybullet_quietly():
         with open(os.devnull, "w") as devnull:
             os.dup2(devnull.fileno(), 1)
             import pybullet
+
+            _flush_c_stdio()  # the banner sits in C's stdout buffer until flushed
     finally:
         os.dup2(saved, 1)
         os.close(saved)
     return pybullet
+
+
+def _flush_c_stdio() -> None:
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no C library handle on this platform
+        pass
 
 
 p = _import_pybullet_quietly()
@@ -75,6 +87,8 @@ class FlightPhysics:
         vehicle_mass_kg: float,
         gui: bool = False,
     ) -> None:
+        self._args = (n_vehicles, flight_seconds_per_step, physics_rate_hz, vehicle_size_m,
+                      vehicle_height_m, vehicle_mass_kg, gui)
         self.dt_s = float(flight_seconds_per_step)
         self.substeps = max(1, math.ceil(self.dt_s * physics_rate_hz - 1e-9))
         self.mass_kg = float(vehicle_mass_kg)
@@ -109,6 +123,33 @@ class FlightPhysics:
         self._dynamic = np.zeros(n_vehicles, dtype=bool)
         self._colliding = np.ones(n_vehicles, dtype=bool)
         self._scenery_built = False
+        #: Wall-clock seconds spent inside the engine's stepping calls (benchmark accounting).
+        self.engine_seconds = 0.0
+
+    # ------------------------------------------------------------------ copies
+    def __getstate__(self) -> dict:
+        """A pybullet client cannot be shared or pickled: a copy (pickle, deepcopy, supersuit's
+        vector envs) records the construction arguments and each body's mode and pose, and opens
+        its own headless client when it is restored."""
+        cid = self.client
+        poses = [p.getBasePositionAndOrientation(b, physicsClientId=cid)[0] for b in self.bodies]
+        return {"args": self._args, "dynamic": self._dynamic.copy(),
+                "colliding": self._colliding.copy(), "poses": poses,
+                "engine_seconds": self.engine_seconds}
+
+    def __setstate__(self, state: dict) -> None:
+        args = list(state["args"])
+        args[-1] = False  # a copy never opens a second GUI window
+        self.__init__(*args)
+        for i, pose in enumerate(state["poses"]):
+            pos = np.asarray(pose, dtype=float)
+            if not state["colliding"][i]:
+                self.make_absent(i)
+            elif state["dynamic"][i]:
+                self.make_dynamic(i, pos)
+            else:
+                self.make_static(i, pos)
+        self.engine_seconds = state["engine_seconds"]
 
     # ------------------------------------------------------------------ body modes
     def make_static(self, i: int, pos: np.ndarray) -> None:
@@ -171,6 +212,7 @@ class FlightPhysics:
         Returns:
             The ``M`` positions at the end of the step, as measured by the engine.
         """
+        start = time.perf_counter()
         cid = self.client
         bodies = self.bodies
         zero = (0.0, 0.0, 0.0)
@@ -186,13 +228,18 @@ class FlightPhysics:
                     p.applyExternalForce(b, -1, (g * vel[0], g * vel[1], g * vel[2]), pos,
                                          p.WORLD_FRAME, physicsClientId=cid)
         p.stepSimulation(physicsClientId=cid)
-        return [p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)[0] for i in vehicles]
+        positions = [p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)[0] for i in vehicles]
+        self.engine_seconds += time.perf_counter() - start
+        return positions
 
     def contact_pairs(self) -> list[tuple[int, int]]:
         """Vehicle pairs ``(i, j)``, ``i < j``, in contact at the end of the last step."""
         pairs = set()
         lookup = self._body_to_vehicle
-        for c in p.getContactPoints(physicsClientId=self.client):
+        start = time.perf_counter()
+        contacts = p.getContactPoints(physicsClientId=self.client)
+        self.engine_seconds += time.perf_counter() - start
+        for c in contacts:
             a, b = lookup.get(c[1]), lookup.get(c[2])
             if a is not None and b is not None and a != b:
                 pairs.add((min(a, b), max(a, b)))

@@ -1,0 +1,104 @@
+"""A trained GCN checkpoint as a controller (``act(observation) -> action``).
+
+The checkpoint carries the env config it was trained on; an observation whose graph sizes or
+action count differ (another layout or fleet) is refused with both shapes named, and a file that
+is not a complete training checkpoint is refused when it is loaded.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+
+from agents.base import Controller
+
+
+class CheckpointError(ValueError):
+    """A file that is not a usable marl_vertiport checkpoint, or one that does not fit the env."""
+
+
+def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint {path}: no such file")
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # truncated or foreign file: torch raises many kinds
+        raise CheckpointError(f"checkpoint {path} is corrupt or not a torch file "
+                              f"({type(exc).__name__}: {exc})") from exc
+    meta = (data.get("infos") or {}).get("marl_vertiport") if isinstance(data, dict) else None
+    if meta is None or "actor_state_dict" not in data:
+        raise CheckpointError(f"checkpoint {path} is not a marl_vertiport training checkpoint "
+                              "(no actor weights or run metadata)")
+    return data
+
+
+class GCNController(Controller):
+    """Greedy (or sampling) action of a trained shared GCN actor.
+
+    Args:
+        path: a ``model_<it>.pt`` written by ``python -m agents.train``.
+        deterministic: take the most likely legal action (default) instead of sampling.
+    """
+
+    def __init__(self, path: str | Path, deterministic: bool = True, seed: int | None = None) -> None:
+        from agents.gcn.models import GraphActor
+        from agents.gcn.training import feature_names
+        from marl_vertiport.config import from_dict
+        from marl_vertiport.vertiport_v0 import raw_env
+
+        # One intra-op thread: a single-observation forward pass is mostly overhead, and
+        # evaluation runs one process per core.
+        torch.set_num_threads(1)
+        self.path = Path(path)
+        self.name = f"gcn:{self.path.name}"
+        data = read_checkpoint(self.path)
+        meta = data["infos"]["marl_vertiport"]
+        env_cfg = from_dict(meta["env_config"])
+        model = meta["train_config"]["model"]
+        probe = raw_env(config=env_cfg)
+        probe.reset(seed=0)
+        example = self._tensors(probe.observe(probe.possible_agents[0]))
+        probe.close()
+        self.expected = {k: tuple(v.shape[1:]) for k, v in example.items()}
+        groups = {"actor": ["port_nodes", "evtol_nodes", "self"]}
+        self.actor = GraphActor(example, groups, "actor", 1, feature_names("observation"),
+                                hidden=model["hidden"], hidden_dims=model["hidden_dims"])
+        try:
+            self.actor.load_state_dict(data["actor_state_dict"])
+        except RuntimeError as exc:
+            raise CheckpointError(f"checkpoint {self.path}: its weights do not fit the GCN actor "
+                                  f"for this env ({exc})") from exc
+        self.actor.eval()
+        self.deterministic = deterministic
+        self.generator = torch.Generator().manual_seed(seed or 0)
+        self.train_info = meta
+
+    @staticmethod
+    def _tensors(observation: dict) -> TensorDict:
+        inner = observation["observation"]
+        data = {k: torch.as_tensor(np.asarray(inner[k]), dtype=torch.float32).unsqueeze(0)
+                for k in ("port_nodes", "evtol_nodes", "self")}
+        data["action_mask"] = torch.as_tensor(np.asarray(observation["action_mask"])).bool().unsqueeze(0)
+        return TensorDict(data, batch_size=[1])
+
+    def reset(self, seed: int | None = None) -> None:
+        if seed is not None:
+            self.generator.manual_seed(seed)
+
+    def act(self, observation: dict) -> int:
+        obs = self._tensors(observation)
+        for key, shape in self.expected.items():
+            if tuple(obs[key].shape[1:]) != shape:
+                raise CheckpointError(
+                    f"checkpoint {self.path} was trained on {key} of shape {shape}, but the env "
+                    f"gives {tuple(obs[key].shape[1:])}: another layout, fleet size or action count")
+        with torch.no_grad():
+            if self.deterministic:
+                return int(self.actor(obs).item())
+            probs = self.actor.action_probabilities(obs)
+            return int(torch.multinomial(probs, 1, generator=self.generator).item())

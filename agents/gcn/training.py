@@ -1,0 +1,533 @@
+"""Training the GCN ATC with rsl_rl's ``OnPolicyRunner`` and ``PPO``.
+
+``python -m agents.train --config default`` (``make train``). A run lives in its own folder
+(``runs/train/<name>/``): the resolved configs, TensorBoard logs, checkpoints ``model_<it>.pt``
+(written atomically), ``curves.csv``, ``learning_curves.png`` and the final evaluation.
+``--resume <run folder>`` continues an interrupted run from its last checkpoint.
+
+rsl_rl does the rollouts, PPO updates, logging and checkpoint content; this module only
+configures it, optionally warm-starts the models from the expert dispatcher's demonstrations
+(behaviour cloning for the actor, Monte-Carlo returns for the critic), wraps ``save`` to be
+atomic and adds a per-iteration hook (progress line, NaN stop, learning curves).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import math
+import os
+import re
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+
+from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
+from marl_vertiport.sim.core import (
+    CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
+    STATE_PORT_FEATURES,
+)
+
+TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
+CHECKPOINT_FORMAT = 1
+CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_loss", "surrogate_loss",
+              "entropy", "learning_rate", "total_reward", "mean_battery_pct", "good_takeoffs",
+              "good_landings", "mean_delay_min", "collisions", "separation_losses",
+              "battery_depletions")
+
+
+# ------------------------------------------------------------------------------ config schema
+@dataclass(frozen=True)
+class PretrainConfig:
+    episodes_steps: int = 1440
+    """Steps of expert-dispatcher demonstrations per env copy (0: no warm start)."""
+    epochs: int = 6
+    """Passes over the demonstrations."""
+    batch_size: int = 1024
+    learning_rate: float = 1e-3
+
+
+@dataclass(frozen=True)
+class AlgorithmConfig:
+    """rsl_rl PPO arguments (same names)."""
+
+    learning_rate: float = 1e-4
+    gamma: float = 0.99
+    lam: float = 0.95
+    entropy_coef: float = 0.001
+    clip_param: float = 0.1
+    num_learning_epochs: int = 4
+    num_mini_batches: int = 4
+    value_loss_coef: float = 1.0
+    max_grad_norm: float = 1.0
+    schedule: str = "adaptive"
+    desired_kl: float = 0.01
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    hidden: int = 64
+    """Width of the GCN layers."""
+    hidden_dims: tuple[int, ...] = (128, 64)
+    """MLP head (the paper: 128-64)."""
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    episodes: int = 20
+    """Held-out episodes per case for the evaluation at the end of training (0: none)."""
+    agents: tuple[str, ...] = ("random", "fcfs", "heuristic")
+    """Baselines evaluated beside the learned policy."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    mode: str = "multi_agent"
+    """``multi_agent`` (AEC, one row per eVTOL, critic on ``state()``) or ``single_agent``."""
+    env_config: str = "paper"
+    num_envs: int = 32
+    num_steps_per_env: int = 32
+    iterations: int = 250
+    save_interval: int = 10
+    seed: int = 0
+    device: str = "cpu"
+    """``cpu`` or ``cuda`` / ``cuda:0`` where a GPU is present."""
+    torch_threads: int = 1
+    """Intra-op threads; tiny graph batches run fastest on one."""
+    team_reward: bool = True
+    """Multi-agent mode: every eVTOL's row gets the step's reward (cooperative); False credits
+    only the acting eVTOL (per-agent returns, which reward selfish use of the charger)."""
+    critic_warmup_iterations: int = 0
+    """First PPO iterations with the actor frozen, so that the critic fits the warm-started
+    policy before its advantages move the actor."""
+    pretrain: PretrainConfig = field(default_factory=PretrainConfig)
+    algorithm: AlgorithmConfig = field(default_factory=AlgorithmConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.mode in ("multi_agent", "single_agent"), "mode", "multi_agent or single_agent"),
+            (self.num_envs >= 1, "num_envs", "must be >= 1"),
+            (self.num_steps_per_env >= 1, "num_steps_per_env", "must be >= 1"),
+            (self.iterations >= 1, "iterations", "must be >= 1"),
+            (self.save_interval >= 1, "save_interval", "must be >= 1"),
+            (self.torch_threads >= 1, "torch_threads", "must be >= 1"),
+            (self.algorithm.learning_rate > 0, "algorithm.learning_rate", "must be > 0"),
+            (0 <= self.algorithm.gamma <= 1, "algorithm.gamma", "must lie in [0, 1]"),
+            (self.algorithm.schedule in ("adaptive", "fixed"), "algorithm.schedule", "adaptive or fixed"),
+            (self.pretrain.episodes_steps >= 0 and self.pretrain.epochs >= 0, "pretrain", "must be >= 0"),
+            (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
+            (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),
+        ]
+        for ok, name, msg in checks:
+            if not ok:
+                raise ConfigError(f"{name}: {msg}")
+
+
+def load_train_config(config: str | Path) -> TrainConfig:
+    """A name in ``configs/train/`` or a YAML path."""
+    path = Path(config)
+    if not path.suffix and not path.exists():
+        path = TRAIN_CONFIG_DIR / f"{config}.yaml"
+    if not path.is_file():
+        known = ", ".join(sorted(p.stem for p in TRAIN_CONFIG_DIR.glob("*.yaml")))
+        raise ConfigError(f"train config {str(config)!r}: no such file (shipped: {known})")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    try:
+        return build_dataclass(TrainConfig, data)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
+
+
+# ------------------------------------------------------------------------------ rsl_rl wiring
+def feature_names(kind: str) -> dict[str, list[str]]:
+    """Column names of the three observation groups a graph model reads."""
+    if kind == "observation":
+        return {"ports": list(PORT_FEATURES), "evtols": list(EVTOL_FEATURES), "extra": list(SELF_FEATURES)}
+    return {"ports": list(STATE_PORT_FEATURES), "evtols": list(EVTOL_FEATURES) + list(STATE_EXTRA_FEATURES),
+            "extra": list(CLOCK_FEATURES)}
+
+
+def runner_config(cfg: TrainConfig) -> dict[str, Any]:
+    """The ``train_cfg`` dict of rsl_rl's ``OnPolicyRunner``."""
+    from agents.gcn.vec_env import POLICY_GROUPS, STATE_GROUPS
+
+    centralised_critic = cfg.mode == "multi_agent"
+    model = {"hidden": cfg.model.hidden, "hidden_dims": list(cfg.model.hidden_dims)}
+    return {
+        "num_steps_per_env": cfg.num_steps_per_env,
+        "save_interval": cfg.save_interval,
+        "logger": "tensorboard",
+        "obs_groups": {"actor": list(POLICY_GROUPS),
+                       "critic": list(STATE_GROUPS if centralised_critic else POLICY_GROUPS)},
+        "algorithm": {"class_name": "PPO", **to_dict(cfg.algorithm)},
+        "actor": {"class_name": "agents.gcn.models:GraphActor", "feature_names": feature_names("observation"),
+                  "mask_group": "action_mask",
+                  "distribution_cfg": {"class_name": "agents.gcn.distribution:MaskedCategorical"}, **model},
+        "critic": {"class_name": "agents.gcn.models:GraphCritic",
+                   "feature_names": feature_names("state" if centralised_critic else "observation"), **model},
+    }
+
+
+def make_vec_env(cfg: TrainConfig):
+    from agents.gcn.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
+
+    if cfg.mode == "multi_agent":
+        return MultiAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device,
+                                seed=cfg.seed, team_reward=cfg.team_reward)
+    return SingleAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device, seed=cfg.seed)
+
+
+class TrainingDiverged(RuntimeError):
+    """A loss or a parameter became NaN or infinite."""
+
+
+def _make_runner_class():
+    from rsl_rl.runners import OnPolicyRunner
+
+    class AtomicRunner(OnPolicyRunner):
+        """``OnPolicyRunner`` whose checkpoints are written atomically and carry the metadata
+        needed to check them against an env, with a hook after every iteration."""
+
+        checkpoint_infos: dict[str, Any] = {}
+        on_iteration = None
+
+        def save(self, path: str, infos: dict | None = None) -> None:
+            tmp = f"{path}.tmp"
+            super().save(tmp, {**self.checkpoint_infos, **(infos or {})})
+            os.replace(tmp, path)
+
+        def install_hook(self) -> None:
+            original = self.logger.log
+
+            def log(*args, **kwargs):
+                with contextlib.redirect_stdout(io.StringIO()):  # our own progress line instead
+                    original(*args, **kwargs)
+                if self.on_iteration is not None:
+                    self.on_iteration(self, kwargs)
+
+            self.logger.log = log
+
+    return AtomicRunner
+
+
+# ------------------------------------------------------------------------------ checkpoints
+def checkpoint_infos(cfg: TrainConfig, env_cfg) -> dict[str, Any]:
+    return {"marl_vertiport": {"format": CHECKPOINT_FORMAT, "mode": cfg.mode,
+                               "train_config": to_dict(cfg), "env_config": to_dict(env_cfg)}}
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    """The complete checkpoint with the highest iteration in a run folder (temp files ignored)."""
+    found = []
+    for path in run_dir.glob("model_*.pt"):
+        m = re.fullmatch(r"model_(\d+)\.pt", path.name)
+        if m:
+            found.append((int(m.group(1)), path))
+    return max(found)[1] if found else None
+
+
+# ------------------------------------------------------------------------------ warm start
+def pretrain_from_dispatcher(runner, vec_env, cfg: TrainConfig, log=print) -> dict[str, float]:
+    """Behaviour cloning of the expert dispatcher (actor, cross-entropy on the rows that act)
+    and Monte-Carlo value targets of its rollouts (critic); a warm start for PPO."""
+    from agents.gcn.distribution import masked_logits
+    from agents.gcn.vec_env import observation_of_row
+    from agents.heuristic import DispatcherController
+
+    steps = cfg.pretrain.episodes_steps
+    if steps <= 0 or cfg.pretrain.epochs <= 0:
+        return {}
+    expert = DispatcherController()
+    obs = vec_env.get_observations()
+    stored, actions, acting, rewards, dones = [], [], [], [], []
+    start = time.time()
+    for t in range(steps):
+        rows = vec_env.acting_rows()
+        act = torch.zeros(vec_env.num_envs, 1)
+        for r in rows.tolist():
+            act[r, 0] = expert.act(observation_of_row(obs, r))
+        flags = torch.zeros(vec_env.num_envs, dtype=torch.bool)
+        flags[rows] = True
+        next_obs, rew, done, _ = vec_env.step(act)
+        stored.append(obs)
+        actions.append(act)
+        acting.append(flags)
+        rewards.append(rew)
+        dones.append(done.bool())
+        obs = next_obs
+        if (t + 1) % 240 == 0:
+            log(f"  demonstrations: {t + 1}/{steps} steps ({time.time() - start:.0f} s)")
+    gamma = cfg.algorithm.gamma
+    returns = torch.zeros(len(rewards), vec_env.num_envs)
+    running = torch.zeros(vec_env.num_envs)
+    for t in reversed(range(len(rewards))):
+        running = rewards[t] + gamma * running * (~dones[t]).float()
+        returns[t] = running
+    # The last steps lack their future; keep the value targets whose horizon is mostly seen.
+    horizon = min(len(rewards), int(3.0 / max(1e-6, 1.0 - gamma))) if gamma < 1 else len(rewards) // 2
+    keep_t = max(1, len(rewards) - horizon)
+    data = torch.cat(stored[:keep_t])
+    act_all = torch.cat(actions[:keep_t])
+    acting_all = torch.cat(acting[:keep_t])
+    ret_all = returns[:keep_t].reshape(-1, 1)
+    ret_scale = float(ret_all.var().clamp_min(1.0))
+    actor, critic = runner.alg.actor, runner.alg.critic
+    params = list(actor.parameters()) + list(critic.parameters())
+    opt = torch.optim.Adam(params, lr=cfg.pretrain.learning_rate)
+    n = data.batch_size[0]
+    gen = torch.Generator().manual_seed(cfg.seed)
+    stats = {}
+    for epoch in range(cfg.pretrain.epochs):
+        perm = torch.randperm(n, generator=gen)
+        ce_sum = v_sum = acc_sum = count = 0.0
+        for i in range(0, n, cfg.pretrain.batch_size):
+            idx = perm[i:i + cfg.pretrain.batch_size]
+            batch = data[idx]
+            logits = actor.logits(batch)
+            logp = torch.log_softmax(masked_logits(logits, batch["action_mask"]), dim=-1)
+            sel = acting_all[idx]
+            target = act_all[idx, 0].long()
+            ce = -(logp[sel].gather(-1, target[sel].unsqueeze(-1))).mean() if sel.any() else logp.sum() * 0
+            value = critic(batch)
+            v_loss = ((value - ret_all[idx]) ** 2).mean()
+            # Returns are in the hundreds, cross-entropy about 1: scale the value loss to match.
+            loss = ce + v_loss / ret_scale
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(params, 1.0)
+            opt.step()
+            with torch.no_grad():
+                acc = (logp[sel].argmax(-1) == target[sel]).float().mean() if sel.any() else torch.tensor(0.0)
+            ce_sum += float(ce.detach()) * len(idx)
+            v_sum += float(v_loss.detach()) * len(idx)
+            acc_sum += float(acc) * len(idx)
+            count += len(idx)
+        stats = {"cross_entropy": ce_sum / count, "value_mse": v_sum / count, "accuracy": acc_sum / count}
+        log(f"  warm start epoch {epoch + 1}/{cfg.pretrain.epochs}: cross-entropy "
+            f"{stats['cross_entropy']:.3f}, expert-action accuracy {stats['accuracy']:.1%}, "
+            f"value MSE {stats['value_mse']:.1f}")
+    return stats
+
+
+# ------------------------------------------------------------------------------ curves
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def read_curves(path: Path) -> list[dict[str, float]]:
+    if not path.exists():
+        return []
+    with path.open() as fh:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+
+def write_curves(path: Path, rows: list[dict[str, float]]) -> None:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(CURVE_KEYS))
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: row.get(k, float("nan")) for k in CURVE_KEYS})
+    _write_atomic(path, buf.getvalue())
+
+
+def plot_curves(rows: list[dict[str, float]], out: Path, title: str) -> None:
+    """The paper's learning-curve figure: reward and loss, battery, take-offs/landings, delay,
+    collisions per episode against environment steps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.array([r["env_steps"] for r in rows]) / 1000.0
+    panels = [
+        ("Total reward per episode", [("total_reward", "total reward")]),
+        ("PPO losses", [("value_loss", "value loss"), ("surrogate_loss", "surrogate loss")]),
+        ("Mean battery (%)", [("mean_battery_pct", "mean battery")]),
+        ("Good operations per episode", [("good_takeoffs", "take-offs"), ("good_landings", "landings")]),
+        ("Mean delay per eVTOL (min)", [("mean_delay_min", "delay")]),
+        ("Safety events per episode", [("collisions", "collisions (S = -5)"),
+                                       ("separation_losses", "separation losses"),
+                                       ("battery_depletions", "depletions")]),
+    ]
+    fig, axes = plt.subplots(2, 3, figsize=(14, 7.5))
+    for ax, (panel_title, series) in zip(axes.ravel(), panels):
+        for key, label in series:
+            y = np.array([r.get(key, np.nan) for r in rows], dtype=float)
+            ok = np.isfinite(y)
+            if ok.any():
+                ax.plot(x[ok], y[ok], marker=".", label=label)
+        ax.set_title(panel_title)
+        ax.set_xlabel("environment steps (thousands)")
+        ax.grid(alpha=0.3)
+        if len(series) > 1:
+            ax.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    tmp = out.with_name(out.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, out)
+
+
+# ------------------------------------------------------------------------------ the run
+def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool = True,
+          log=print) -> Path:
+    """Train (or resume) in ``run_dir``; returns the final checkpoint's path."""
+    world_size = int(os.environ.get("WORLD_SIZE", "1"))
+    if world_size > 1:
+        # Under torchrun each rank takes its own GPU and its own episodes (rsl_rl's multi-GPU
+        # path; rank 0 logs and saves).
+        rank, local_rank = int(os.environ.get("RANK", "0")), int(os.environ.get("LOCAL_RANK", "0"))
+        if cfg.device == "cuda":
+            cfg = build_dataclass(TrainConfig, {**to_dict(cfg), "device": f"cuda:{local_rank}"})
+        cfg = build_dataclass(TrainConfig, {**to_dict(cfg), "seed": cfg.seed + 1000 * rank})
+    torch.set_num_threads(cfg.torch_threads)
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)  # rsl_rl's storage shuffles with torch; nothing else is global
+    if cfg.device.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"device: {cfg.device!r} requested but no CUDA device is available")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    env_cfg = load_config(cfg.env_config)
+    if not resume:
+        _write_atomic(run_dir / "train_config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
+        _write_atomic(run_dir / "env_config.yaml", yaml.safe_dump(to_dict(env_cfg), sort_keys=False))
+    vec_env = make_vec_env(cfg)
+    runner_cls = _make_runner_class()
+    runner = runner_cls(vec_env, runner_config(cfg), log_dir=str(run_dir), device=cfg.device)
+    runner.checkpoint_infos = checkpoint_infos(cfg, env_cfg)
+    curves_path = run_dir / "curves.csv"
+    curves = read_curves(curves_path) if resume else []
+    if resume:
+        ckpt = latest_checkpoint(run_dir)
+        if ckpt is None:
+            raise FileNotFoundError(f"{run_dir}: no checkpoint (model_<iteration>.pt) to resume from")
+        load_checkpoint_into(runner, ckpt)
+        runner.current_learning_iteration += 1
+        curves = [r for r in curves if r["iteration"] < runner.current_learning_iteration]
+        log(f"resuming {run_dir} from {ckpt.name} at iteration {runner.current_learning_iteration}")
+    else:
+        stats = pretrain_from_dispatcher(runner, vec_env, cfg, log=log)
+        if stats:
+            runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
+    remaining = cfg.iterations - runner.current_learning_iteration
+    samples_per_it = cfg.num_envs * cfg.num_steps_per_env
+    t0 = time.time()
+    start_it = runner.current_learning_iteration
+
+    def on_iteration(r, kwargs) -> None:
+        it = kwargs["it"]
+        losses = kwargs["loss_dict"]
+        bad = [k for k, v in losses.items() if not math.isfinite(float(v))]
+        bad_params = [n for n, p in list(r.alg.actor.named_parameters()) + list(r.alg.critic.named_parameters())
+                      if not torch.isfinite(p).all()]
+        if bad or bad_params:
+            raise TrainingDiverged(f"training diverged at iteration {it}: non-finite "
+                                   f"{', '.join(bad + bad_params[:3])}; the last good checkpoint "
+                                   f"is kept in {run_dir}")
+        row = {"iteration": it, "env_steps": (it + 1) * samples_per_it,
+               "steps_per_s": samples_per_it * (it + 1 - start_it) / max(time.time() - t0, 1e-9),
+               "mean_reward": float(np.mean(r.logger.rewbuffer)) if len(r.logger.rewbuffer) else float("nan"),
+               "value_loss": float(losses.get("value", float("nan"))),
+               "surrogate_loss": float(losses.get("surrogate", float("nan"))),
+               "entropy": float(losses.get("entropy", float("nan"))),
+               "learning_rate": float(kwargs["learning_rate"])}
+        row.update(vec_env.pop_episode_means())
+        curves.append(row)
+        write_curves(curves_path, curves)
+        done = it + 1 - start_it
+        eta = (time.time() - t0) / done * (cfg.iterations - it - 1)
+        msg = (f"it {it + 1:4d}/{cfg.iterations}  {row['steps_per_s']:6.0f} steps/s  "
+               f"lr {row['learning_rate']:.1e}  value loss {row['value_loss']:8.3f}")
+        if math.isfinite(row.get("total_reward", float("nan"))):
+            msg += (f"  | day: reward {row['total_reward']:7.1f} battery {row['mean_battery_pct']:4.1f}% "
+                    f"good TO/LD {row['good_takeoffs']:4.1f}/{row['good_landings']:4.1f} "
+                    f"delay {row['mean_delay_min']:6.1f} coll {row['collisions']:4.1f}")
+        log(f"{msg}  eta {eta / 60:4.1f} min")
+
+    warmup_end = cfg.critic_warmup_iterations
+    frozen = runner.current_learning_iteration < warmup_end
+    if frozen:
+        runner.alg.actor.requires_grad_(False)
+        log(f"critic warm-up: actor frozen for the first {warmup_end} iterations")
+
+    def hook(r, kwargs) -> None:
+        on_iteration(r, kwargs)
+        if kwargs["it"] + 1 == warmup_end:
+            r.alg.actor.requires_grad_(True)
+
+    runner.on_iteration = hook
+    runner.install_hook()
+    if remaining > 0:
+        log(f"training {cfg.mode} on {cfg.env_config}: {remaining} iterations of "
+            f"{samples_per_it} env steps ({cfg.num_envs} copies x {cfg.num_steps_per_env})")
+        runner.learn(remaining)
+    final = latest_checkpoint(run_dir)
+    vec_env.close()
+    if curves:
+        plot_curves(curves, run_dir / "learning_curves.png", f"GCN-PPO ({cfg.mode}, {cfg.env_config})")
+    if evaluate and cfg.evaluation.episodes > 0 and final is not None:
+        from agents.evaluate import main as evaluate_main
+
+        log(f"evaluating {final.name} against {', '.join(cfg.evaluation.agents)} on held-out seeds")
+        evaluate_main(["--agents", str(final), *cfg.evaluation.agents, "--episodes",
+                       str(cfg.evaluation.episodes), "--out", str(run_dir / "eval")])
+    return final
+
+
+def load_checkpoint_into(runner, path: Path) -> None:
+    """Load a checkpoint into a runner, with a clear error when it does not fit."""
+    try:
+        runner.load(str(path), map_location=runner.device)
+    except (RuntimeError, KeyError, EOFError, OSError) as exc:
+        raise ValueError(f"checkpoint {path} cannot be loaded into this run: {exc}") from exc
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--config", default="default", help="name in configs/train/ or a YAML path")
+    parser.add_argument("--resume", metavar="RUN_DIR", help="continue the run in this folder")
+    parser.add_argument("--run-dir", help="folder of a new run (default runs/train/<config>_<time>)")
+    parser.add_argument("--iterations", type=int, help="override the number of PPO iterations")
+    parser.add_argument("--device", help="override the device (cpu, cuda, cuda:0)")
+    parser.add_argument("--no-eval", action="store_true", help="skip the evaluation at the end")
+    args = parser.parse_args(argv)
+    try:
+        if args.resume:
+            run_dir = Path(args.resume)
+            if not (run_dir / "train_config.yaml").is_file():
+                raise ConfigError(f"{run_dir}: not a training run (no train_config.yaml)")
+            cfg = load_train_config(run_dir / "train_config.yaml")
+        else:
+            cfg = load_train_config(args.config)
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            run_dir = Path(args.run_dir or f"runs/train/{Path(args.config).stem}_{stamp}")
+        overrides = {}
+        if args.iterations is not None:
+            overrides["iterations"] = args.iterations
+        if args.device is not None:
+            overrides["device"] = args.device
+        if overrides:
+            cfg = build_dataclass(TrainConfig, {**to_dict(cfg), **overrides})
+        final = train(cfg, run_dir, resume=bool(args.resume), evaluate=not args.no_eval)
+    except (ConfigError, FileNotFoundError, ValueError, TrainingDiverged) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2 if not isinstance(exc, TrainingDiverged) else 3
+    print(f"done: {final}")
+    return 0

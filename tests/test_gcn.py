@@ -1,0 +1,250 @@
+"""The learned ATC's parts: masked distribution, GCN models, VecEnv adapters, training runs,
+checkpoints, and the parity of the multi-agent and single-agent paths."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from agents.gcn.distribution import MaskedCategorical
+from agents.gcn.models import GraphActor, GraphCritic
+from agents.gcn.policy import CheckpointError, GCNController
+from agents.gcn.training import (
+    TrainConfig, TrainingDiverged, feature_names, latest_checkpoint, runner_config, train,
+)
+from agents.gcn.vec_env import POLICY_GROUPS, STATE_GROUPS, MultiAgentVecEnv, SingleAgentVecEnv
+from marl_vertiport.config import build_dataclass, to_dict
+
+torch.set_num_threads(1)
+
+
+# ------------------------------------------------------------------ distribution
+def test_masked_categorical_matches_torch_on_hand_made_logits():
+    logits = torch.tensor([[1.0, 2.0, 0.5, -1.0], [0.0, 0.0, 3.0, 1.0]])
+    mask = torch.tensor([[True, False, True, True], [False, True, True, False]])
+    dist = MaskedCategorical(1, 4)
+    dist.update(logits, mask)
+    for row in range(2):
+        legal = mask[row]
+        ref = torch.distributions.Categorical(logits=logits[row][legal])
+        torch.testing.assert_close(dist.probs[row][legal], ref.probs)
+        assert (dist.probs[row][~legal] == 0).all()
+        torch.testing.assert_close(dist.entropy[row], ref.entropy())
+        legal_idx = torch.nonzero(legal).squeeze(-1)
+        lp = dist.log_prob(legal_idx[:, None].float().T.reshape(-1, 1)[:1].expand(2, 1))
+        assert torch.isfinite(lp).all()
+        for k, action in enumerate(legal_idx.tolist()):
+            actions = torch.full((2, 1), float(action))
+            torch.testing.assert_close(dist.log_prob(actions)[row], ref.log_prob(torch.tensor(k)))
+    # row 0: probabilities of the legal logits (1, 0.5, -1) after softmax
+    expected = torch.softmax(torch.tensor([1.0, 0.5, -1.0]), 0)
+    torch.testing.assert_close(dist.probs[0, [0, 2, 3]], expected)
+    assert dist.kl_divergence(dist.params, dist.params).abs().max() < 1e-6
+
+
+def test_masked_categorical_never_samples_a_masked_action():
+    torch.manual_seed(0)
+    dist = MaskedCategorical(1, 6)
+    logits = torch.randn(512, 6) * 3
+    mask = torch.rand(512, 6) > 0.5
+    mask[:, 0] = True
+    dist.update(logits, mask)
+    for _ in range(20):
+        a = dist.sample().long().squeeze(-1)
+        assert mask[torch.arange(512), a].all()
+    assert mask[torch.arange(512), dist.deterministic_output(logits, mask).long().squeeze(-1)].all()
+    assert torch.isfinite(dist.entropy).all()
+
+
+# ------------------------------------------------------------------ models
+def example_obs(batch: int, seed: int = 0) -> TensorDict:
+    env = MultiAgentVecEnv("paper", num_envs=batch, seed=seed)
+    obs = env.get_observations()
+    env.close()
+    return obs
+
+
+def test_actor_and_critic_shapes_on_batched_graphs():
+    obs = example_obs(3)  # 3 copies x 4 eVTOLs = 12 rows
+    actor = GraphActor(obs, {"actor": list(POLICY_GROUPS)}, "actor", 1, feature_names("observation"))
+    critic = GraphCritic(obs, {"critic": list(STATE_GROUPS)}, "critic", 1, feature_names("state"))
+    assert actor(obs).shape == (12, 1) and actor(obs, stochastic_output=True).shape == (12, 1)
+    assert actor.get_output_log_prob(actor(obs, stochastic_output=True)).shape == (12,)
+    assert actor.output_entropy.shape == (12,)
+    assert actor.action_probabilities(obs).shape == (12, 14)
+    assert critic(obs).shape == (12, 1)
+
+
+def test_gcn_output_is_invariant_to_the_order_of_the_fleet():
+    torch.manual_seed(1)
+    obs = example_obs(2)
+    actor = GraphActor(obs, {"actor": list(POLICY_GROUPS)}, "actor", 1, feature_names("observation"))
+    critic = GraphCritic(obs, {"critic": list(STATE_GROUPS)}, "critic", 1, feature_names("state"))
+    perm = torch.tensor([2, 0, 3, 1])
+    shuffled = obs.clone()
+    shuffled["evtol_nodes"] = obs["evtol_nodes"][:, perm]
+    shuffled["state_evtol_nodes"] = obs["state_evtol_nodes"][:, perm]
+    with torch.no_grad():
+        torch.testing.assert_close(actor.logits(shuffled), actor.logits(obs))
+        torch.testing.assert_close(critic(shuffled), critic(obs))
+        # ... but not to the order of the ports, whose identity the node actions refer to.
+        ports = obs.clone()
+        ports["port_nodes"] = obs["port_nodes"][:, torch.tensor([1, 0, 2, 3, 4, 5, 6, 7, 8, 9])]
+        ports["port_nodes"][..., 0] = torch.tensor([1.0, 0, 0, 1, 0, 1, 0, 1, 1, 0])
+        assert not torch.allclose(actor.logits(ports), actor.logits(obs))
+
+
+# ------------------------------------------------------------------ parity of the two paths
+@pytest.mark.slow
+def test_actor_probabilities_identical_through_aec_and_single_agent_paths():
+    torch.manual_seed(0)
+    ma = MultiAgentVecEnv("paper_uncertain", num_envs=1, seed=3)
+    sa = SingleAgentVecEnv("paper_uncertain", num_envs=1, seed=3)
+    obs_ma, obs_sa = ma.get_observations(), sa.get_observations()
+    actor = GraphActor(obs_ma, {"actor": list(POLICY_GROUPS)}, "actor", 1, feature_names("observation"))
+    actor.eval()
+    for step in range(1440):
+        row = int(ma.acting_rows()[0])
+        with torch.no_grad():
+            p_ma = actor.action_probabilities(obs_ma[row:row + 1])
+            p_sa = actor.action_probabilities(obs_sa)
+        assert torch.equal(p_ma, p_sa), f"probabilities differ at step {step}"
+        action = torch.multinomial(p_sa, 1).float()
+        rows = torch.zeros(ma.num_envs, 1)
+        rows[row] = action
+        obs_ma, r_ma, d_ma, _ = ma.step(rows)
+        obs_sa, r_sa, d_sa, _ = sa.step(action)
+        assert float(r_ma[row]) == float(r_sa[0])
+    assert bool(d_sa[0]) and bool(d_ma.all())
+
+
+def tiny_config(mode: str, **extra) -> TrainConfig:
+    base = to_dict(TrainConfig())
+    base.update(mode=mode, num_envs=2, num_steps_per_env=8, iterations=2, save_interval=1,
+                critic_warmup_iterations=0,
+                pretrain={"episodes_steps": 0, "epochs": 0, "batch_size": 64, "learning_rate": 1e-3},
+                evaluation={"episodes": 0, "agents": []})
+    base.update(extra)
+    return build_dataclass(TrainConfig, base)
+
+
+def test_one_ppo_iteration_same_update_in_both_modes_on_the_same_observations():
+    """With one eVTOL the multi-agent rows are the single-agent rows; fed the same observations
+    (the critic on the same groups), one PPO iteration from the same seed updates the
+    parameters identically."""
+    from rsl_rl.runners import OnPolicyRunner
+
+    params = []
+    for mode, cls in (("multi_agent", MultiAgentVecEnv), ("single_agent", SingleAgentVecEnv)):
+        cfg = tiny_config(mode, env_config="paper")
+        env = cls(build_env_cfg(), num_envs=2, seed=5)
+        rc = runner_config(cfg)
+        rc["obs_groups"]["critic"] = list(POLICY_GROUPS)
+        rc["critic"]["feature_names"] = feature_names("observation")
+        torch.manual_seed(0)
+        runner = OnPolicyRunner(env, rc, log_dir=None, device="cpu")
+        runner.learn(1)
+        params.append(torch.cat([p.detach().flatten() for p in runner.alg.actor.parameters()]
+                                + [p.detach().flatten() for p in runner.alg.critic.parameters()]))
+        env.close()
+    assert torch.equal(params[0], params[1])
+
+
+def build_env_cfg():
+    from marl_vertiport.config import load_config
+
+    return load_config("paper", fleet_size=1)
+
+
+# ------------------------------------------------------------------ training runs
+@pytest.mark.parametrize("mode", ["multi_agent", "single_agent"])
+def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
+    cfg = tiny_config(mode, pretrain={"episodes_steps": 16, "epochs": 1, "batch_size": 64,
+                                      "learning_rate": 1e-3})
+    final = train(cfg, tmp_path, log=lambda *_: None, evaluate=False)
+    assert final.name == "model_1.pt" and (tmp_path / "model_0.pt").exists()
+    assert (tmp_path / "curves.csv").exists() and (tmp_path / "learning_curves.png").exists()
+    assert not list(tmp_path.glob("*.tmp"))
+    ctl = GCNController(final)
+    from agents.base import run_aec_episode
+    from marl_vertiport import vertiport_v0
+
+    metrics = run_aec_episode(vertiport_v0.env(**{"schedule.episode_steps": 20}), ctl, 1)
+    assert metrics["steps"] == 20
+    # Resume to 3 iterations: continues from model_1 and writes model_2.
+    cfg3 = build_dataclass(TrainConfig, {**to_dict(cfg), "iterations": 3})
+    final3 = train(cfg3, tmp_path, resume=True, log=lambda *_: None, evaluate=False)
+    assert final3.name == "model_2.pt"
+    assert [int(r["iteration"]) for r in __import__("agents.gcn.training", fromlist=["x"]).read_curves(
+        tmp_path / "curves.csv")] == [0, 1, 2]
+
+
+def test_bad_checkpoints_are_refused_clearly(tmp_path):
+    bad = tmp_path / "model_3.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="corrupt"):
+        GCNController(bad)
+    torch.save({"foo": 1}, tmp_path / "other.pt")
+    with pytest.raises(CheckpointError, match="not a marl_vertiport training checkpoint"):
+        GCNController(tmp_path / "other.pt")
+    # A checkpoint of a 3-eVTOL fleet refuses observations of the 4-eVTOL paper layout.
+    small = tmp_path / "small.yaml"
+    small.write_text("base: paper\nfleet_size: 3\n")
+    final = train(tiny_config("single_agent", iterations=1, env_config=str(small)),
+                  tmp_path / "small", log=lambda *_: None, evaluate=False)
+    ctl = GCNController(final)
+    from marl_vertiport import vertiport_v0
+
+    env = vertiport_v0.env()
+    env.reset(seed=0)
+    with pytest.raises(CheckpointError, match="evtol_nodes of shape"):
+        ctl.act(env.observe(env.agent_selection))
+
+
+def test_nan_in_training_stops_with_the_iteration_named(tmp_path, monkeypatch):
+    from rsl_rl.algorithms import PPO
+
+    original = PPO.update
+
+    def poisoned(self):
+        losses = original(self)
+        losses["value"] = float("nan")
+        return losses
+
+    monkeypatch.setattr(PPO, "update", poisoned)
+    with pytest.raises(TrainingDiverged, match="iteration 0"):
+        train(tiny_config("single_agent"), tmp_path, log=lambda *_: None, evaluate=False)
+
+
+@pytest.mark.slow
+def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
+    run = tmp_path / "run"
+    cmd = [sys.executable, "-m", "agents.train", "--config", str(tmp_path / "cfg.yaml"),
+           "--run-dir", str(run), "--no-eval"]
+    import yaml
+
+    cfg = to_dict(tiny_config("single_agent", iterations=200))
+    (tmp_path / "cfg.yaml").write_text(yaml.safe_dump(cfg))
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    deadline = time.time() + 120
+    while time.time() < deadline:  # wait for a checkpoint beyond the first
+        last = latest_checkpoint(run)
+        if last is not None and last.name != "model_0.pt":
+            break
+        time.sleep(0.2)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    last = latest_checkpoint(run)
+    assert last is not None
+    done = int(last.stem.split("_")[1])
+    torch.load(last, weights_only=False)  # the last checkpoint is complete and loads
+    cfg_short = build_dataclass(TrainConfig, {**cfg, "iterations": done + 2})
+    final = train(cfg_short, run, resume=True, log=lambda *_: None, evaluate=False)
+    assert final.name == f"model_{done + 1}.pt"
