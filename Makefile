@@ -47,7 +47,7 @@ evaluate: $(STAMP)  ## evaluate AGENTS on both cases, EPISODES per case (JSON, C
 	$(PY) -m agents.evaluate --agents $(AGENTS) --episodes $(EPISODES) --out runs/eval
 
 results: $(STAMP)  ## regenerate docs/results.md and its figures (50 episodes per case)
-	$(PY) -m agents.evaluate --agents random fcfs heuristic --episodes 50 --out docs/results --report docs/results.md
+	$(PY) -m agents.evaluate --agents random fcfs heuristic gcn --episodes 50 --out docs/results --report docs/results.md
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
 	$(PY) -m agents.render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif

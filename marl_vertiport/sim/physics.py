@@ -125,6 +125,8 @@ class FlightPhysics:
         self._scenery_built = False
         #: Wall-clock seconds spent inside the engine's stepping calls (benchmark accounting).
         self.engine_seconds = 0.0
+        #: Number of ``step`` calls that advanced the engine (steps in which bodies moved).
+        self.engine_steps = 0
 
     # ------------------------------------------------------------------ copies
     def __getstate__(self) -> dict:
@@ -230,6 +232,7 @@ class FlightPhysics:
         p.stepSimulation(physicsClientId=cid)
         positions = [p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)[0] for i in vehicles]
         self.engine_seconds += time.perf_counter() - start
+        self.engine_steps += 1
         return positions
 
     def contact_pairs(self) -> list[tuple[int, int]]:
