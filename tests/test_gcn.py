@@ -166,7 +166,7 @@ def build_env_cfg():
 @pytest.mark.parametrize("mode", ["multi_agent", "single_agent"])
 def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     cfg = tiny_config(mode, pretrain={"episodes_steps": 16, "epochs": 1, "batch_size": 64,
-                                      "learning_rate": 1e-3})
+                                      "learning_rate": 1e-3, "dagger_rounds": 1})
     final = train(cfg, tmp_path, log=lambda *_: None, evaluate=False)
     assert final.name == "model_1.pt" and (tmp_path / "model_0.pt").exists()
     assert (tmp_path / "curves.csv").exists() and (tmp_path / "learning_curves.png").exists()

@@ -52,6 +52,8 @@ class PretrainConfig:
     """Passes over the demonstrations."""
     batch_size: int = 1024
     learning_rate: float = 1e-3
+    dagger_rounds: int = 0
+    """Rounds of DAgger after behaviour cloning: the learner drives, the dispatcher labels."""
 
 
 @dataclass(frozen=True)
@@ -239,36 +241,95 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
 
 
 # ------------------------------------------------------------------------------ warm start
-def pretrain_from_dispatcher(runner, vec_env, cfg: TrainConfig, log=print) -> dict[str, float]:
-    """Behaviour cloning of the expert dispatcher (actor, cross-entropy on the rows that act)
-    and Monte-Carlo value targets of its rollouts (critic); a warm start for PPO."""
-    from agents.gcn.distribution import masked_logits
+def _rollout(vec_env, expert, steps: int, learner=None, log=print, label: str = "demonstrations"):
+    """Run ``steps`` env steps; the expert labels every acting row. The expert drives, or the
+    learner (greedy) when given (DAgger: the expert's labels on the learner's own states)."""
     from agents.gcn.vec_env import observation_of_row
+
+    obs = vec_env.get_observations()
+    stored, labels, acting, rewards, dones = [], [], [], [], []
+    start = time.time()
+    for t in range(steps):
+        rows = vec_env.acting_rows()
+        expert_act = torch.zeros(vec_env.num_envs, 1)
+        for r in rows.tolist():
+            expert_act[r, 0] = expert.act(observation_of_row(obs, r))
+        if learner is None:
+            act = expert_act
+        else:
+            with torch.no_grad():
+                act = learner(obs)
+        flags = torch.zeros(vec_env.num_envs, dtype=torch.bool)
+        flags[rows] = True
+        next_obs, rew, done, _ = vec_env.step(act)
+        stored.append(obs)
+        labels.append(expert_act)
+        acting.append(flags)
+        rewards.append(rew)
+        dones.append(done.bool())
+        obs = next_obs
+        if (t + 1) % 480 == 0:
+            log(f"  {label}: {t + 1}/{steps} steps ({time.time() - start:.0f} s)")
+    return stored, labels, acting, rewards, dones
+
+
+def _fit(actor, critic, data, labels, acting, returns, cfg: TrainConfig, log, tag: str) -> dict[str, float]:
+    """Cross-entropy of the actor on the expert's labels (acting rows) and, where ``returns``
+    is given, the critic's squared error on them."""
+    from agents.gcn.distribution import masked_logits
+
+    params = list(actor.parameters()) + (list(critic.parameters()) if returns is not None else [])
+    opt = torch.optim.Adam(params, lr=cfg.pretrain.learning_rate)
+    ret_scale = float(returns.var().clamp_min(1.0)) if returns is not None else 1.0
+    n = data.batch_size[0]
+    gen = torch.Generator().manual_seed(cfg.seed)
+    stats: dict[str, float] = {}
+    for epoch in range(cfg.pretrain.epochs):
+        perm = torch.randperm(n, generator=gen)
+        sums = {"cross_entropy": 0.0, "value_mse": 0.0, "accuracy": 0.0}
+        count = 0
+        for i in range(0, n, cfg.pretrain.batch_size):
+            idx = perm[i:i + cfg.pretrain.batch_size]
+            batch = data[idx]
+            sel = acting[idx]
+            target = labels[idx, 0].long()
+            logp = torch.log_softmax(masked_logits(actor.logits(batch), batch["action_mask"]), dim=-1)
+            ce = -(logp[sel].gather(-1, target[sel].unsqueeze(-1))).mean() if sel.any() else logp.sum() * 0
+            loss = ce
+            v_loss = torch.zeros(())
+            if returns is not None:
+                v_loss = ((critic(batch) - returns[idx]) ** 2).mean()
+                # Returns are in the tens to hundreds, cross-entropy about 1: scale to match.
+                loss = ce + v_loss / ret_scale
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(params, 1.0)
+            opt.step()
+            with torch.no_grad():
+                acc = (logp[sel].argmax(-1) == target[sel]).float().mean() if sel.any() else torch.zeros(())
+            for key, value in (("cross_entropy", ce), ("value_mse", v_loss), ("accuracy", acc)):
+                sums[key] += float(value.detach()) * len(idx)
+            count += len(idx)
+        stats = {k: v / count for k, v in sums.items()}
+        log(f"  {tag} epoch {epoch + 1}/{cfg.pretrain.epochs}: cross-entropy "
+            f"{stats['cross_entropy']:.3f}, expert-action accuracy {stats['accuracy']:.1%}"
+            + (f", value MSE {stats['value_mse']:.1f}" if returns is not None else ""))
+    return stats
+
+
+def pretrain_from_dispatcher(runner, vec_env, cfg: TrainConfig, log=print) -> dict[str, float]:
+    """Warm start from the expert dispatcher: behaviour cloning of the actor (cross-entropy on
+    the rows that act) with Monte-Carlo value targets of the expert's rollouts for the critic,
+    then ``pretrain.dagger_rounds`` rounds of DAgger (the learner drives, the expert labels the
+    states it visits, the actor is refit on everything collected)."""
     from agents.heuristic import DispatcherController
 
     steps = cfg.pretrain.episodes_steps
     if steps <= 0 or cfg.pretrain.epochs <= 0:
         return {}
     expert = DispatcherController()
-    obs = vec_env.get_observations()
-    stored, actions, acting, rewards, dones = [], [], [], [], []
-    start = time.time()
-    for t in range(steps):
-        rows = vec_env.acting_rows()
-        act = torch.zeros(vec_env.num_envs, 1)
-        for r in rows.tolist():
-            act[r, 0] = expert.act(observation_of_row(obs, r))
-        flags = torch.zeros(vec_env.num_envs, dtype=torch.bool)
-        flags[rows] = True
-        next_obs, rew, done, _ = vec_env.step(act)
-        stored.append(obs)
-        actions.append(act)
-        acting.append(flags)
-        rewards.append(rew)
-        dones.append(done.bool())
-        obs = next_obs
-        if (t + 1) % 240 == 0:
-            log(f"  demonstrations: {t + 1}/{steps} steps ({time.time() - start:.0f} s)")
+    actor, critic = runner.alg.actor, runner.alg.critic
+    stored, labels, acting, rewards, dones = _rollout(vec_env, expert, steps, log=log)
     gamma = cfg.algorithm.gamma
     returns = torch.zeros(len(rewards), vec_env.num_envs)
     running = torch.zeros(vec_env.num_envs)
@@ -279,45 +340,20 @@ def pretrain_from_dispatcher(runner, vec_env, cfg: TrainConfig, log=print) -> di
     horizon = min(len(rewards), int(3.0 / max(1e-6, 1.0 - gamma))) if gamma < 1 else len(rewards) // 2
     keep_t = max(1, len(rewards) - horizon)
     data = torch.cat(stored[:keep_t])
-    act_all = torch.cat(actions[:keep_t])
+    label_all = torch.cat(labels[:keep_t])
     acting_all = torch.cat(acting[:keep_t])
-    ret_all = returns[:keep_t].reshape(-1, 1)
-    ret_scale = float(ret_all.var().clamp_min(1.0))
-    actor, critic = runner.alg.actor, runner.alg.critic
-    params = list(actor.parameters()) + list(critic.parameters())
-    opt = torch.optim.Adam(params, lr=cfg.pretrain.learning_rate)
-    n = data.batch_size[0]
-    gen = torch.Generator().manual_seed(cfg.seed)
-    stats = {}
-    for epoch in range(cfg.pretrain.epochs):
-        perm = torch.randperm(n, generator=gen)
-        ce_sum = v_sum = acc_sum = count = 0.0
-        for i in range(0, n, cfg.pretrain.batch_size):
-            idx = perm[i:i + cfg.pretrain.batch_size]
-            batch = data[idx]
-            logits = actor.logits(batch)
-            logp = torch.log_softmax(masked_logits(logits, batch["action_mask"]), dim=-1)
-            sel = acting_all[idx]
-            target = act_all[idx, 0].long()
-            ce = -(logp[sel].gather(-1, target[sel].unsqueeze(-1))).mean() if sel.any() else logp.sum() * 0
-            value = critic(batch)
-            v_loss = ((value - ret_all[idx]) ** 2).mean()
-            # Returns are in the hundreds, cross-entropy about 1: scale the value loss to match.
-            loss = ce + v_loss / ret_scale
-            opt.zero_grad()
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(params, 1.0)
-            opt.step()
-            with torch.no_grad():
-                acc = (logp[sel].argmax(-1) == target[sel]).float().mean() if sel.any() else torch.tensor(0.0)
-            ce_sum += float(ce.detach()) * len(idx)
-            v_sum += float(v_loss.detach()) * len(idx)
-            acc_sum += float(acc) * len(idx)
-            count += len(idx)
-        stats = {"cross_entropy": ce_sum / count, "value_mse": v_sum / count, "accuracy": acc_sum / count}
-        log(f"  warm start epoch {epoch + 1}/{cfg.pretrain.epochs}: cross-entropy "
-            f"{stats['cross_entropy']:.3f}, expert-action accuracy {stats['accuracy']:.1%}, "
-            f"value MSE {stats['value_mse']:.1f}")
+    stats = _fit(actor, critic, data, label_all, acting_all, returns[:keep_t].reshape(-1, 1), cfg,
+                 log, "warm start")
+    for round_ in range(cfg.pretrain.dagger_rounds):
+        actor.eval()
+        stored, labels, acting, _, _ = _rollout(vec_env, expert, steps, learner=actor, log=log,
+                                                label=f"DAgger round {round_ + 1}")
+        actor.train()
+        data = torch.cat([data, torch.cat(stored)])
+        label_all = torch.cat([label_all, torch.cat(labels)])
+        acting_all = torch.cat([acting_all, torch.cat(acting)])
+        stats = _fit(actor, critic, data, label_all, acting_all, None, cfg, log,
+                     f"DAgger round {round_ + 1}")
     return stats
 
 
