@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from agents.base import (
-    ARRIVING, AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, run_aec_episode, run_gym_episode,
+    AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, run_aec_episode, run_gym_episode,
 )
 from agents.fcfs import FCFSController
 from agents.heuristic import DispatcherController

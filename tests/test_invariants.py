@@ -5,7 +5,7 @@ import pytest
 
 from conftest import busy_action
 from marl_vertiport import IllegalActionError, vertiport_v0
-from marl_vertiport.sim.core import AWAY, HOVER_SPOT, OUT_OF_SERVICE
+from marl_vertiport.sim.core import AWAY, OUT_OF_SERVICE
 
 
 def run_day(config: str, seed: int, policy: str, check=None, **overrides) -> list:
@@ -93,8 +93,12 @@ def test_reset_without_seed_continues_the_generator():
     env = vertiport_v0.env(config="paper_uncertain")
     env.reset(seed=5)
     first = env.unwrapped.sim.pending_time.copy()
+    rng = env.unwrapped.sim.rng
+    state = rng.bit_generator.state
     env.reset()
-    second = env.unwrapped.sim.pending_time.copy()
+    # The same generator goes on (not reseeded, not replaced) ...
+    assert env.unwrapped.sim.rng is rng and rng.bit_generator.state != state
+    # ... and a seeded reset reproduces the seeded start.
     env.reset(seed=5)
     assert np.array_equal(env.unwrapped.sim.pending_time, first)
 

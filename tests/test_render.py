@@ -1,6 +1,5 @@
 """The episode renderer (agents/render.py): CLI output, overlay, label placement, errors."""
 
-import os
 import subprocess
 import sys
 from pathlib import Path

@@ -17,9 +17,8 @@ import pytest
 
 from conftest import seed0_sim
 
-from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import (
-    HOVERING, NO_OPERATION, ON_CHARGER, ON_PORT, PENDING_LANDING, TAXIING, VertiportSim,
+    HOVERING, NO_OPERATION, ON_PORT, PENDING_LANDING, TAXIING, VertiportSim,
 )
 
 W = (0.3, 0.3, 0.35, 0.1, 0.35)

@@ -17,7 +17,7 @@ from conftest import seed0_sim
 
 from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import (
-    ARRIVING, AWAY, DEPARTING, DELAYED, EARLY, HOVERING, NO_OPERATION, ON_CHARGER, ON_PORT,
+    ARRIVING, AWAY, DEPARTING, DELAYED, EARLY, NO_OPERATION, ON_PORT,
     ON_TIME, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, TAXIING, VertiportSim,
 )
 
