@@ -433,7 +433,6 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         cfg = build_dataclass(TrainConfig, {**to_dict(cfg), "seed": cfg.seed + 1000 * rank})
     torch.set_num_threads(cfg.torch_threads)
     torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)  # rsl_rl's storage shuffles with torch; nothing else is global
     if cfg.device.startswith("cuda") and not torch.cuda.is_available():
         raise ConfigError(f"device: {cfg.device!r} requested but no CUDA device is available")
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -132,7 +132,9 @@ class MultiAgentVecEnv(_VertiportVecEnv):
     def _observe_copy(self, k: int) -> None:
         env, buf = self.envs[k], self._buf
         sim = env.sim
-        buf["port_nodes"][k] = sim.port_nodes()
+        state = sim.state_arrays()
+        # The state's port columns 0-3 are the observation's port features.
+        buf["port_nodes"][k] = state["port_nodes"][:, : buf["port_nodes"].shape[-1]]
         base = sim._evtol_base()
         evtol = buf["evtol_nodes"][k]
         evtol[:] = base
@@ -141,7 +143,6 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         masks = buf["action_mask"][k]
         masks[:] = self._noop_mask
         masks[sim.acting] = sim.action_mask(sim.acting)
-        state = sim.state_arrays()
         buf["state_port_nodes"][k] = state["port_nodes"]
         st_evtol = buf["state_evtol_nodes"][k]
         st_evtol[:] = state["evtol_nodes"]

@@ -61,7 +61,6 @@ class ActionLayout:
     """Indices of the discrete actions, derived from the layout (paper's table I order)."""
 
     n_nodes: int
-    n_ports: int
     stay: int = 0
     takeoff: int = 1
     continue_: int = field(init=False)
@@ -146,7 +145,7 @@ class VertiportSim:
     def __init__(self, config: EnvConfig, gui: bool = False) -> None:
         self.cfg = config
         self.layout = Layout.from_config(config)
-        self.actions = ActionLayout(self.layout.n_nodes, self.layout.n_ports)
+        self.actions = ActionLayout(self.layout.n_nodes)
         self.n = config.fleet_size
         fl = config.flight
         self.physics = FlightPhysics(self.n, fl.flight_seconds_per_step, fl.physics_rate_hz,

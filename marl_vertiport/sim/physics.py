@@ -248,10 +248,6 @@ class FlightPhysics:
                 pairs.add((min(a, b), max(a, b)))
         return sorted(pairs)
 
-    def teleport(self, i: int, pos: np.ndarray) -> None:
-        p.resetBasePositionAndOrientation(self.bodies[i], pos.tolist(), (0, 0, 0, 1),
-                                          physicsClientId=self.client)
-
     # ------------------------------------------------------------------ rendering
     def build_scenery(self, node_xy_m: np.ndarray, node_type: np.ndarray, node_z_m: np.ndarray,
                       airspace_radius_m: float) -> None:
