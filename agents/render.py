@@ -37,15 +37,15 @@ from marl_vertiport.sim.core import (
     PENDING_TAKEOFF, TAXIING, VertiportSim,
 )
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT
-from marl_vertiport.sim.physics import VEHICLE_COLOURS
+# Labels are placed with the same projection the engine's camera uses.
+from marl_vertiport.sim.physics import (
+    CAMERA_FAR_M, CAMERA_FOV_DEG, CAMERA_NEAR_M, VEHICLE_COLOURS,
+)
 
 __all__ = ["Camera", "FrameComposer", "GifQuantiser", "fit_camera", "hhmm", "main", "parse_size",
            "record_episode", "write_video"]
 
 DEFAULT_SIZE = (640, 480)
-#: Projection parameters of ``FlightPhysics.camera_image`` (FOV in degrees, near, far in m):
-#: labels are placed with the same matrices the renderer uses.
-CAMERA_FOV_DEG, CAMERA_NEAR_M, CAMERA_FAR_M = 50.0, 0.5, 400.0
 DEFAULT_YAW_DEG, DEFAULT_PITCH_DEG = 0.0, -65.0  # +x to the right, +y away from the viewer
 LOW_BATTERY_PCT = 30.0
 

@@ -63,6 +63,9 @@ VEHICLE_COLOURS = (
     (0.10, 0.70, 0.60, 1), (0.95, 0.45, 0.70, 1), (0.45, 0.45, 0.45, 1), (0.60, 0.80, 0.20, 1),
 )
 
+#: Projection of ``camera_image``: field of view (degrees), near and far clip planes (m).
+CAMERA_FOV_DEG, CAMERA_NEAR_M, CAMERA_FAR_M = 50.0, 0.5, 400.0
+
 _PARKED_FAR_Z_M = -50.0  # where bodies of vehicles outside the airspace wait (below ground)
 
 
@@ -289,7 +292,8 @@ class FlightPhysics:
         cid = self.client
         view = p.computeViewMatrixFromYawPitchRoll(target_m, distance_m, yaw_deg, pitch_deg, 0, 2,
                                                    physicsClientId=cid)
-        proj = p.computeProjectionMatrixFOV(50.0, width / height, 0.5, 400.0, physicsClientId=cid)
+        proj = p.computeProjectionMatrixFOV(CAMERA_FOV_DEG, width / height, CAMERA_NEAR_M,
+                                            CAMERA_FAR_M, physicsClientId=cid)
         _, _, rgba, _, _ = p.getCameraImage(width, height, view, proj,
                                             renderer=p.ER_TINY_RENDERER, physicsClientId=cid)
         return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
