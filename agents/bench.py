@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from agents.files import write_atomic
+
 PAPER_STEPS_PER_S = 5.0  # the paper's AirSim simulator: about 0.2 s per step
 
 
@@ -295,18 +297,10 @@ def main(argv: list[str] | None = None) -> int:
     results["inference"] = bench_inference()
     results["training"] = bench_training(args.train_iterations)
     results["env_peak_memory_mb"] = bench_env_memory()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = out / "bench.json.tmp"
-    tmp.write_text(json.dumps(results, indent=2))
-    os.replace(tmp, out / "bench.json")
+    write_atomic(Path(args.out) / "bench.json", json.dumps(results, indent=2))
     text = report(results)
     if args.report:
-        path = Path(args.report)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text)
-        os.replace(tmp, path)
+        write_atomic(Path(args.report), text)
     print(text)
     return 0
 

@@ -31,7 +31,6 @@ import os
 import shlex
 import signal
 import sys
-import tempfile
 import time
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -42,6 +41,7 @@ import numpy as np
 import yaml
 
 from agents.base import run_aec_episode
+from agents.files import write_atomic
 from agents.registry import AgentSpecError, make_controller
 from agents.seeds import EVAL_SEEDS
 
@@ -540,30 +540,6 @@ def format_table(evaluation: Evaluation) -> str:
 # ============================================================================ files
 
 
-def _atomic_write(path: Path, data: bytes | str) -> None:
-    """Write ``path`` through a temporary file in the same folder and ``os.replace``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    payload = data.encode("utf-8") if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def _csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
@@ -874,7 +850,7 @@ def write_outputs(evaluation: Evaluation, out: Path, command: str,
 
     def put(name: str | Path, data: bytes | str) -> None:
         path = out / name if isinstance(name, str) else name
-        _atomic_write(path, data)
+        write_atomic(path, data)
         written.append(path)
 
     put("episodes.csv", episodes_csv(evaluation))

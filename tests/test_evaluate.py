@@ -263,15 +263,17 @@ def test_report_has_tables_and_image_links(serial_run):
 
 
 def test_atomic_write_keeps_old_file_on_failure(tmp_path, monkeypatch):
+    import agents.files as files
+
     path = tmp_path / "episodes.csv"
-    ev._atomic_write(path, "old\n")
+    files.write_atomic(path, "old\n")
 
     def broken_replace(src, dst):
         raise OSError("disk full")
 
-    monkeypatch.setattr(ev.os, "replace", broken_replace)
+    monkeypatch.setattr(files.os, "replace", broken_replace)
     with pytest.raises(OSError):
-        ev._atomic_write(path, "new\n")
+        files.write_atomic(path, "new\n")
     assert path.read_text() == "old\n"
     assert [p.name for p in tmp_path.iterdir()] == ["episodes.csv"]
 

@@ -29,6 +29,7 @@ import numpy as np
 import torch
 import yaml
 
+from agents.files import write_atomic
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.sim.core import (
     CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
@@ -358,12 +359,6 @@ def pretrain_from_dispatcher(runner, vec_env, cfg: TrainConfig, log=print) -> di
 
 
 # ------------------------------------------------------------------------------ curves
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def read_curves(path: Path) -> list[dict[str, float]]:
     if not path.exists():
         return []
@@ -377,7 +372,7 @@ def write_curves(path: Path, rows: list[dict[str, float]]) -> None:
     writer.writeheader()
     for row in rows:
         writer.writerow({k: row.get(k, float("nan")) for k in CURVE_KEYS})
-    _write_atomic(path, buf.getvalue())
+    write_atomic(path, buf.getvalue())
 
 
 def plot_curves(rows: list[dict[str, float]], out: Path, title: str) -> None:
@@ -438,8 +433,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     run_dir.mkdir(parents=True, exist_ok=True)
     env_cfg = load_config(cfg.env_config)
     if not resume:
-        _write_atomic(run_dir / "train_config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
-        _write_atomic(run_dir / "env_config.yaml", yaml.safe_dump(to_dict(env_cfg), sort_keys=False))
+        write_atomic(run_dir / "train_config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
+        write_atomic(run_dir / "env_config.yaml", yaml.safe_dump(to_dict(env_cfg), sort_keys=False))
     vec_env = make_vec_env(cfg)
     runner_cls = _make_runner_class()
     runner = runner_cls(vec_env, runner_config(cfg), log_dir=str(run_dir), device=cfg.device)
