@@ -12,6 +12,7 @@ acting vehicle is returned.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -172,6 +173,9 @@ class VertiportSim:
         self._no_charger_failure = np.zeros(len(self._charging_nodes), dtype=bool)
         un = config.uncertainty
         self._noisy_obs = un.position_noise_std_m > 0 or un.position_noise_mean_m != 0
+        # Everything set so far is fixed for the env's life; what follows is episode state,
+        # which snapshot() copies.
+        self._static_keys = frozenset(self.__dict__) | {"_static_keys"}
         self.rng = np.random.default_rng(0)
         self._allocate()
 
@@ -249,6 +253,28 @@ class VertiportSim:
         self._mask_cache: dict[int, np.ndarray] = {}
         self._evtol_cache: np.ndarray | None = None
         self.last_info: dict[str, Any] = {}
+
+    # ================================================================== snapshots
+    def snapshot(self) -> dict[str, Any]:
+        """A deep copy of the episode state (vehicles, plans, clock, metrics, generator, and
+        each engine body's mode and position), for planners that look ahead by simulating.
+
+        The engine needs no more than that: a dynamic body's velocity is set at the start of
+        every step, and bodies carry no other state between steps.
+        """
+        state = {k: copy.deepcopy(v) for k, v in self.__dict__.items() if k not in self._static_keys}
+        state["_physics"] = self.physics.body_states()
+        return state
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Put this sim in the episode state ``state`` taken by :meth:`snapshot` of this sim or of
+        another sim built from the same config (the snapshot itself is not changed)."""
+        for k, v in state.items():
+            if k != "_physics":
+                setattr(self, k, copy.deepcopy(v))
+        self.physics.set_body_states(state["_physics"])
+        if not self._noisy_obs:
+            self.obs_xy = self.pos[:, :2]  # a view of the positions, as after a step
 
     # ================================================================== bookkeeping helpers
     def _occupy(self, v: int, node: int) -> None:

@@ -136,25 +136,34 @@ class FlightPhysics:
         """A pybullet client cannot be shared or pickled: a copy (pickle, deepcopy, supersuit's
         vector envs) records the construction arguments and each body's mode and pose, and opens
         its own headless client when it is restored."""
-        cid = self.client
-        poses = [p.getBasePositionAndOrientation(b, physicsClientId=cid)[0] for b in self.bodies]
-        return {"args": self._args, "dynamic": self._dynamic.copy(),
-                "colliding": self._colliding.copy(), "poses": poses,
-                "engine_seconds": self.engine_seconds}
+        return {"args": self._args, "bodies": self.body_states(), "engine_seconds": self.engine_seconds}
 
     def __setstate__(self, state: dict) -> None:
         args = list(state["args"])
         args[-1] = False  # a copy never opens a second GUI window
         self.__init__(*args)
-        for i, pose in enumerate(state["poses"]):
-            pos = np.asarray(pose, dtype=float)
-            if not state["colliding"][i]:
-                self.make_absent(i)
-            elif state["dynamic"][i]:
-                self.make_dynamic(i, pos)
-            else:
-                self.make_static(i, pos)
+        self.set_body_states(state["bodies"])
         self.engine_seconds = state["engine_seconds"]
+
+    def body_states(self) -> list[tuple[str, tuple[float, float, float]]]:
+        """Each body's mode (``"dynamic"``, ``"static"`` or ``"absent"``) and position."""
+        cid = self.client
+        modes = ["dynamic" if d else "static" if c else "absent"
+                 for d, c in zip(self._dynamic, self._colliding)]
+        return [(m, p.getBasePositionAndOrientation(b, physicsClientId=cid)[0])
+                for m, b in zip(modes, self.bodies)]
+
+    def set_body_states(self, states: list[tuple[str, tuple[float, float, float]]]) -> None:
+        """Put every body in the mode and at the position of :meth:`body_states`."""
+        if len(states) != len(self.bodies):
+            raise ValueError(f"{len(states)} body states for {len(self.bodies)} vehicle bodies")
+        for i, (mode, pos) in enumerate(states):
+            if mode == "absent":
+                self.make_absent(i)
+            elif mode == "dynamic":
+                self.make_dynamic(i, np.asarray(pos, dtype=float))
+            else:
+                self.make_static(i, np.asarray(pos, dtype=float))
 
     # ------------------------------------------------------------------ body modes
     def make_static(self, i: int, pos: np.ndarray) -> None:
