@@ -136,6 +136,15 @@ def _check_legal(policy: Any, agent: str, action: Any, mask: np.ndarray) -> int:
     return a
 
 
+def _prepare(policy: Any, env: Any, seed: int) -> None:
+    """Start ``policy``'s episode: ``reset(seed)``, and ``bind(sim)`` for a model-based
+    controller that plans with the simulator (such as :class:`agents.rollout.RolloutPlanner`)."""
+    if hasattr(policy, "reset"):
+        policy.reset(seed=seed)
+    if hasattr(policy, "bind"):
+        policy.bind(env.unwrapped.sim)
+
+
 def run_aec_episode(env: Any, policy: Any, seed: int, on_step=None) -> dict[str, Any]:
     """One episode of the AEC env driven by ``policy``; returns the episode metrics.
 
@@ -143,8 +152,7 @@ def run_aec_episode(env: Any, policy: Any, seed: int, on_step=None) -> dict[str,
     actions). A policy returning an illegal action raises ``ValueError`` naming it.
     """
     env.reset(seed=seed)
-    if hasattr(policy, "reset"):
-        policy.reset(seed=seed)
+    _prepare(policy, env, seed)
     info: dict[str, Any] = {}
     for agent in env.agent_iter():
         obs, _, termination, truncation, info = env.last()
@@ -161,8 +169,7 @@ def run_aec_episode(env: Any, policy: Any, seed: int, on_step=None) -> dict[str,
 def run_gym_episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
     """One episode of the single-agent env driven by the same kind of ``policy``."""
     obs, _ = env.reset(seed=seed)
-    if hasattr(policy, "reset"):
-        policy.reset(seed=seed)
+    _prepare(policy, env, seed)
     truncated = terminated = False
     info: dict[str, Any] = {}
     while not (truncated or terminated):

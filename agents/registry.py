@@ -1,4 +1,5 @@
-"""Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``, ``gcn``
+"""Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``,
+``rollout`` (the look-ahead planner, which reads the simulator), ``gcn``
 (the shipped trained policy), ``package.module:Class`` (a class built with no arguments, or a
 ready object), or the path of a training checkpoint (``.pt``)."""
 
@@ -16,6 +17,7 @@ BUILTIN = {
     "random": "agents.random_agent:RandomController",
     "fcfs": "agents.fcfs:FCFSController",
     "heuristic": "agents.heuristic:DispatcherController",
+    "rollout": "agents.rollout:RolloutPlanner",
 }
 
 

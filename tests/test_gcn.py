@@ -127,7 +127,7 @@ def tiny_config(mode: str, **extra) -> TrainConfig:
     base = to_dict(TrainConfig())
     base.update(mode=mode, num_envs=2, num_steps_per_env=8, iterations=2, save_interval=1,
                 critic_warmup_iterations=0,
-                pretrain={"episodes_steps": 0, "epochs": 0, "batch_size": 64, "learning_rate": 1e-3},
+                pretrain={"days": 0, "epochs": 0, "batch_size": 64, "learning_rate": 1e-3},
                 evaluation={"episodes": 0, "agents": []})
     base.update(extra)
     return build_dataclass(TrainConfig, base)
@@ -164,10 +164,13 @@ def build_env_cfg():
 # ------------------------------------------------------------------ training runs
 @pytest.mark.parametrize("mode", ["multi_agent", "single_agent"])
 def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
-    cfg = tiny_config(mode, pretrain={"episodes_steps": 16, "epochs": 1, "batch_size": 64,
-                                      "learning_rate": 1e-3, "dagger_rounds": 1})
+    teacher = "rollout" if mode == "multi_agent" else "heuristic"
+    cfg = tiny_config(mode, pretrain={"days": 2, "day_steps": 24, "teacher": teacher,
+                                      "rollout_horizon": 4, "workers": 1, "epochs": 1,
+                                      "batch_size": 64, "learning_rate": 1e-3, "dagger_rounds": 1})
     final = train(cfg, tmp_path, log=lambda *_: None, evaluate=False)
     assert final.name == "model_1.pt" and (tmp_path / "model_0.pt").exists()
+    assert (tmp_path / "model_warmstart.pt").exists()
     assert (tmp_path / "curves.csv").exists() and (tmp_path / "learning_curves.png").exists()
     assert not list(tmp_path.glob("*.tmp"))
     ctl = GCNController(final)

@@ -41,11 +41,13 @@ class GCNController(Controller):
     """Greedy (or sampling) action of a trained shared GCN actor.
 
     Args:
-        path: a ``model_<it>.pt`` written by ``python -m agents.train``.
+        path: a ``model_<it>.pt`` written by ``python -m agents.train``, or the content of one
+            (a dict with ``actor_state_dict`` and ``infos``).
         deterministic: take the most likely legal action (default) instead of sampling.
     """
 
-    def __init__(self, path: str | Path, deterministic: bool = True, seed: int | None = None) -> None:
+    def __init__(self, path: str | Path | dict[str, Any], deterministic: bool = True,
+                 seed: int | None = None) -> None:
         from agents.gcn.models import GraphActor
         from agents.gcn.training import feature_names
         from marl_vertiport.config import from_dict
@@ -54,9 +56,12 @@ class GCNController(Controller):
         # One intra-op thread: a single-observation forward pass is mostly overhead, and
         # evaluation runs one process per core.
         torch.set_num_threads(1)
-        self.path = Path(path)
+        if isinstance(path, dict):  # checkpoint content already in memory (a learner in training)
+            data, self.path = path, Path("<in memory>")
+        else:
+            self.path = Path(path)
+            data = read_checkpoint(self.path)
         self.name = f"gcn:{self.path.name}"
-        data = read_checkpoint(self.path)
         meta = data["infos"]["marl_vertiport"]
         env_cfg = from_dict(meta["env_config"])
         model = meta["train_config"]["model"]

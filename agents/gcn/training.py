@@ -6,9 +6,9 @@
 ``--resume <run folder>`` continues an interrupted run from its last checkpoint.
 
 rsl_rl does the rollouts, PPO updates, logging and checkpoint content; this module only
-configures it, optionally warm-starts the models from the expert dispatcher's demonstrations
-(behaviour cloning for the actor, Monte-Carlo returns for the critic), wraps ``save`` to be
-atomic and adds a per-iteration hook (progress line, NaN stop, learning curves).
+configures it, optionally warm-starts the actor by imitation of a teacher (the look-ahead
+planner or the expert dispatcher; see agents/gcn/imitation.py), wraps ``save`` to be atomic and
+adds a per-iteration hook (progress line, NaN stop, learning curves).
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ import torch
 import yaml
 
 from agents.files import write_atomic
+from agents.gcn.imitation import warm_start
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.sim.core import (
     CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
@@ -47,14 +48,24 @@ CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_los
 # ------------------------------------------------------------------------------ config schema
 @dataclass(frozen=True)
 class PretrainConfig:
-    episodes_steps: int = 1440
-    """Steps of expert-dispatcher demonstrations per env copy (0: no warm start)."""
+    """Warm start of the actor by imitation (agents/gcn/imitation.py)."""
+
+    days: int = 0
+    """Days of demonstrations per round (0: no warm start)."""
+    day_steps: int = 1440
+    """Steps of each demonstration day (a full day: 1440)."""
+    teacher: str = "rollout"
+    """``rollout`` (the look-ahead planner) or ``heuristic`` (the expert dispatcher)."""
+    rollout_horizon: int = 40
+    """Steps the rollout teacher simulates per candidate action."""
+    workers: int = 2
+    """Processes that run demonstration days."""
     epochs: int = 6
-    """Passes over the demonstrations."""
+    """Passes over the demonstrations after each round."""
     batch_size: int = 1024
     learning_rate: float = 1e-3
     dagger_rounds: int = 0
-    """Rounds of DAgger after behaviour cloning: the learner drives, the dispatcher labels."""
+    """Rounds of DAgger after behaviour cloning: the actor drives, the teacher labels."""
 
 
 @dataclass(frozen=True)
@@ -126,7 +137,12 @@ class TrainConfig:
             (self.algorithm.learning_rate > 0, "algorithm.learning_rate", "must be > 0"),
             (0 <= self.algorithm.gamma <= 1, "algorithm.gamma", "must lie in [0, 1]"),
             (self.algorithm.schedule in ("adaptive", "fixed"), "algorithm.schedule", "adaptive or fixed"),
-            (self.pretrain.episodes_steps >= 0 and self.pretrain.epochs >= 0, "pretrain", "must be >= 0"),
+            (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
+             "pretrain", "days, epochs and dagger_rounds must be >= 0"),
+            (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
+            (self.pretrain.teacher in ("rollout", "heuristic"), "pretrain.teacher", "rollout or heuristic"),
+            (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
+            (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
             (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
             (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),
         ]
@@ -241,123 +257,6 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
     return max(found)[1] if found else None
 
 
-# ------------------------------------------------------------------------------ warm start
-def _rollout(vec_env, expert, steps: int, learner=None, log=print, label: str = "demonstrations"):
-    """Run ``steps`` env steps; the expert labels every acting row. The expert drives, or the
-    learner (greedy) when given (DAgger: the expert's labels on the learner's own states)."""
-    from agents.gcn.vec_env import observation_of_row
-
-    obs = vec_env.get_observations()
-    stored, labels, acting, rewards, dones = [], [], [], [], []
-    start = time.time()
-    for t in range(steps):
-        rows = vec_env.acting_rows()
-        expert_act = torch.zeros(vec_env.num_envs, 1)
-        for r in rows.tolist():
-            expert_act[r, 0] = expert.act(observation_of_row(obs, r))
-        if learner is None:
-            act = expert_act
-        else:
-            with torch.no_grad():
-                act = learner(obs)
-        flags = torch.zeros(vec_env.num_envs, dtype=torch.bool)
-        flags[rows] = True
-        next_obs, rew, done, _ = vec_env.step(act)
-        stored.append(obs)
-        labels.append(expert_act)
-        acting.append(flags)
-        rewards.append(rew)
-        dones.append(done.bool())
-        obs = next_obs
-        if (t + 1) % 480 == 0:
-            log(f"  {label}: {t + 1}/{steps} steps ({time.time() - start:.0f} s)")
-    return stored, labels, acting, rewards, dones
-
-
-def _fit(actor, critic, data, labels, acting, returns, cfg: TrainConfig, log, tag: str) -> dict[str, float]:
-    """Cross-entropy of the actor on the expert's labels (acting rows) and, where ``returns``
-    is given, the critic's squared error on them."""
-    from agents.gcn.distribution import masked_logits
-
-    params = list(actor.parameters()) + (list(critic.parameters()) if returns is not None else [])
-    opt = torch.optim.Adam(params, lr=cfg.pretrain.learning_rate)
-    ret_scale = float(returns.var().clamp_min(1.0)) if returns is not None else 1.0
-    n = data.batch_size[0]
-    gen = torch.Generator().manual_seed(cfg.seed)
-    stats: dict[str, float] = {}
-    for epoch in range(cfg.pretrain.epochs):
-        perm = torch.randperm(n, generator=gen)
-        sums = {"cross_entropy": 0.0, "value_mse": 0.0, "accuracy": 0.0}
-        count = 0
-        for i in range(0, n, cfg.pretrain.batch_size):
-            idx = perm[i:i + cfg.pretrain.batch_size]
-            batch = data[idx]
-            sel = acting[idx]
-            target = labels[idx, 0].long()
-            logp = torch.log_softmax(masked_logits(actor.logits(batch), batch["action_mask"]), dim=-1)
-            ce = -(logp[sel].gather(-1, target[sel].unsqueeze(-1))).mean() if sel.any() else logp.sum() * 0
-            loss = ce
-            v_loss = torch.zeros(())
-            if returns is not None:
-                v_loss = ((critic(batch) - returns[idx]) ** 2).mean()
-                # Returns are in the tens to hundreds, cross-entropy about 1: scale to match.
-                loss = ce + v_loss / ret_scale
-            opt.zero_grad()
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(params, 1.0)
-            opt.step()
-            with torch.no_grad():
-                acc = (logp[sel].argmax(-1) == target[sel]).float().mean() if sel.any() else torch.zeros(())
-            for key, value in (("cross_entropy", ce), ("value_mse", v_loss), ("accuracy", acc)):
-                sums[key] += float(value.detach()) * len(idx)
-            count += len(idx)
-        stats = {k: v / count for k, v in sums.items()}
-        log(f"  {tag} epoch {epoch + 1}/{cfg.pretrain.epochs}: cross-entropy "
-            f"{stats['cross_entropy']:.3f}, expert-action accuracy {stats['accuracy']:.1%}"
-            + (f", value MSE {stats['value_mse']:.1f}" if returns is not None else ""))
-    return stats
-
-
-def pretrain_from_dispatcher(runner, vec_env, cfg: TrainConfig, log=print) -> dict[str, float]:
-    """Warm start from the expert dispatcher: behaviour cloning of the actor (cross-entropy on
-    the rows that act) with Monte-Carlo value targets of the expert's rollouts for the critic,
-    then ``pretrain.dagger_rounds`` rounds of DAgger (the learner drives, the expert labels the
-    states it visits, the actor is refit on everything collected)."""
-    from agents.heuristic import DispatcherController
-
-    steps = cfg.pretrain.episodes_steps
-    if steps <= 0 or cfg.pretrain.epochs <= 0:
-        return {}
-    expert = DispatcherController()
-    actor, critic = runner.alg.actor, runner.alg.critic
-    stored, labels, acting, rewards, dones = _rollout(vec_env, expert, steps, log=log)
-    gamma = cfg.algorithm.gamma
-    returns = torch.zeros(len(rewards), vec_env.num_envs)
-    running = torch.zeros(vec_env.num_envs)
-    for t in reversed(range(len(rewards))):
-        running = rewards[t] + gamma * running * (~dones[t]).float()
-        returns[t] = running
-    # The last steps lack their future; keep the value targets whose horizon is mostly seen.
-    horizon = min(len(rewards), int(3.0 / max(1e-6, 1.0 - gamma))) if gamma < 1 else len(rewards) // 2
-    keep_t = max(1, len(rewards) - horizon)
-    data = torch.cat(stored[:keep_t])
-    label_all = torch.cat(labels[:keep_t])
-    acting_all = torch.cat(acting[:keep_t])
-    stats = _fit(actor, critic, data, label_all, acting_all, returns[:keep_t].reshape(-1, 1), cfg,
-                 log, "warm start")
-    for round_ in range(cfg.pretrain.dagger_rounds):
-        actor.eval()
-        stored, labels, acting, _, _ = _rollout(vec_env, expert, steps, learner=actor, log=log,
-                                                label=f"DAgger round {round_ + 1}")
-        actor.train()
-        data = torch.cat([data, torch.cat(stored)])
-        label_all = torch.cat([label_all, torch.cat(labels)])
-        acting_all = torch.cat([acting_all, torch.cat(acting)])
-        stats = _fit(actor, critic, data, label_all, acting_all, None, cfg, log,
-                     f"DAgger round {round_ + 1}")
-    return stats
-
-
 # ------------------------------------------------------------------------------ curves
 def read_curves(path: Path) -> list[dict[str, float]]:
     if not path.exists():
@@ -450,7 +349,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         curves = [r for r in curves if r["iteration"] < runner.current_learning_iteration]
         log(f"resuming {run_dir} from {ckpt.name} at iteration {runner.current_learning_iteration}")
     else:
-        stats = pretrain_from_dispatcher(runner, vec_env, cfg, log=log)
+        stats = warm_start(runner.alg.actor, cfg, to_dict(env_cfg), log=log)
         if stats:
             runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
     remaining = cfg.iterations - runner.current_learning_iteration

@@ -238,10 +238,3 @@ class SingleAgentVecEnv(_VertiportVecEnv):
     def close(self) -> None:
         self.venv.close()
 
-
-def observation_of_row(obs: TensorDict, row: int) -> dict:
-    """The observation of one row as the envs give it (for controllers such as the dispatcher)."""
-    return {"observation": {"port_nodes": obs["port_nodes"][row].numpy(),
-                            "evtol_nodes": obs["evtol_nodes"][row].numpy(),
-                            "self": obs["self"][row].numpy()},
-            "action_mask": obs["action_mask"][row].numpy().astype(np.int8)}

@@ -1,0 +1,198 @@
+"""Warm start of the shared GCN actor by imitation: behaviour cloning of a teacher, then DAgger.
+
+Teachers (``pretrain.teacher``):
+
+- ``rollout``: the look-ahead planner of :mod:`agents.rollout` (one step of policy improvement
+  over the expert dispatcher, simulating each candidate action ``pretrain.rollout_horizon``
+  steps ahead). It plays clearly better than the dispatcher but reads the simulator and spends
+  tens of milliseconds a decision; the actor learns to take its decisions from observations
+  alone, at a fraction of a millisecond.
+- ``heuristic``: the expert dispatcher itself.
+
+Days of demonstrations run in worker processes, one day per task, through the Gymnasium env:
+the acting eVTOL's observation there is exactly what that eVTOL observes as an AEC agent, so
+the same data trains the actor of both training modes. Only steps with a choice (two or more
+legal actions) are kept: the others teach nothing. In round 0 the teacher drives; in each DAgger
+round the current actor drives (greedily) and the teacher labels the states the actor visits,
+and the actor is refit on everything collected so far.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+
+from agents.seeds import training_seed
+
+#: Observation groups the actor reads, and their dtypes in the collected data.
+ACTOR_GROUPS = ("port_nodes", "evtol_nodes", "self", "action_mask")
+TEACHERS = ("rollout", "heuristic")
+
+
+@dataclass(frozen=True)
+class DayTask:
+    """One day of demonstrations: who drives, who labels."""
+
+    env_config: dict[str, Any]
+    seed: int
+    steps: int
+    teacher: str
+    rollout_horizon: int
+    learner: dict[str, Any] | None = None
+    """Checkpoint content of the actor that drives (DAgger); ``None``: the teacher drives."""
+
+
+def make_teacher(name: str, rollout_horizon: int, seed: int):
+    from agents.heuristic import DispatcherController
+    from agents.rollout import RolloutPlanner
+
+    if name == "rollout":
+        return RolloutPlanner(horizon=rollout_horizon, seed=seed)
+    if name == "heuristic":
+        return DispatcherController()
+    raise ValueError(f"teacher {name!r}: use one of {TEACHERS}")
+
+
+def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Run one day; return the observations of the steps with a choice, the teacher's label of
+    each (``label``, shape ``(T,)``), and the metrics of the day (so far, for a partial day)."""
+    from agents.gcn.policy import GCNController
+    from marl_vertiport.config import from_dict
+    from marl_vertiport.gym_env import VertiportEnv
+
+    torch.set_num_threads(1)
+    env = VertiportEnv(config=from_dict(task.env_config))
+    teacher = make_teacher(task.teacher, task.rollout_horizon, task.seed)
+    learner = GCNController(task.learner) if task.learner is not None else None
+    obs, _ = env.reset(seed=task.seed)
+    if hasattr(teacher, "bind"):
+        teacher.bind(env.sim)
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
+    labels: list[int] = []
+    for _ in range(task.steps):
+        mask = obs["action_mask"]
+        if int(mask.sum()) > 1:
+            label = int(teacher.act(obs))
+            for key in ACTOR_GROUPS[:3]:
+                rows[key].append(obs["observation"][key])
+            rows["action_mask"].append(mask)
+            labels.append(label)
+        else:
+            label = int(np.argmax(mask))
+        action = label if learner is None or int(mask.sum()) == 1 else learner.act(obs)
+        obs, _, _, truncated, _ = env.step(action)
+        if truncated:
+            break
+    metrics = env.sim.episode_metrics()
+    env.close()
+    if hasattr(teacher, "close"):
+        teacher.close()
+    data = {k: np.stack(v) for k, v in rows.items()}
+    data["label"] = np.asarray(labels, dtype=np.int64)
+    return data, metrics
+
+
+def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag: str
+            ) -> tuple[dict[str, np.ndarray], list[dict[str, Any]]]:
+    """Run ``tasks`` on ``workers`` spawned processes (1: in this process), logging each day."""
+    start = time.time()
+    results: list[tuple[dict[str, np.ndarray], dict[str, Any]]] = []
+
+    def report(result) -> None:
+        results.append(result)
+        m = result[1]
+        log(f"  {tag}: day {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
+            f"reward {m.get('total_reward', float('nan')):.0f}, "
+            f"depletions {m.get('battery_depletions', 0)}, {len(result[0]['label'])} decisions")
+
+    if workers <= 1:
+        for task in tasks:
+            report(label_day(task))
+    else:
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            for fut in as_completed([pool.submit(label_day, t) for t in tasks]):
+                report(fut.result())
+    data = {k: np.concatenate([r[0][k] for r in results]) for k in results[0][0]}
+    return data, [r[1] for r in results]
+
+
+def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
+    """Collected arrays as the actor's observation groups (mask as bool), rows first."""
+    out = {k: torch.from_numpy(np.ascontiguousarray(data[k])).float() for k in ACTOR_GROUPS[:3]}
+    out["action_mask"] = torch.from_numpy(data["action_mask"]).bool()
+    return TensorDict(out, batch_size=[len(data["label"])])
+
+
+def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, learning_rate: float,
+              seed: int, log: Callable[[str], None], tag: str) -> dict[str, float]:
+    """Cross-entropy of the actor's masked softmax on the teacher's labels."""
+    from agents.gcn.distribution import masked_logits
+
+    obs = to_tensordict(data)
+    target = torch.from_numpy(data["label"])
+    opt = torch.optim.Adam(actor.parameters(), lr=learning_rate)
+    gen = torch.Generator().manual_seed(seed)
+    n = len(target)
+    stats: dict[str, float] = {}
+    actor.train()
+    for epoch in range(epochs):
+        perm = torch.randperm(n, generator=gen)
+        ce_sum = acc_sum = 0.0
+        for i in range(0, n, batch_size):
+            idx = perm[i:i + batch_size]
+            batch = obs[idx]
+            logp = torch.log_softmax(masked_logits(actor.logits(batch), batch["action_mask"]), dim=-1)
+            ce = -logp.gather(-1, target[idx].unsqueeze(-1)).mean()
+            opt.zero_grad()
+            ce.backward()
+            torch.nn.utils.clip_grad_norm_(actor.parameters(), 1.0)
+            opt.step()
+            ce_sum += float(ce.detach()) * len(idx)
+            acc_sum += float((logp.argmax(-1) == target[idx]).float().sum())
+        stats = {"cross_entropy": ce_sum / n, "accuracy": acc_sum / n, "samples": float(n)}
+        log(f"  {tag} epoch {epoch + 1}/{epochs}: cross-entropy {stats['cross_entropy']:.3f}, "
+            f"teacher-action accuracy {stats['accuracy']:.1%} on {n} decisions")
+    return stats
+
+
+def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None] = print
+               ) -> dict[str, float]:
+    """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
+    docstring); ``cfg`` is the :class:`~agents.gcn.training.TrainConfig`. Returns the last fit's
+    statistics and the mean reward of each round's days."""
+    from marl_vertiport.config import to_dict
+
+    pre = cfg.pretrain
+    if pre.days <= 0 or pre.epochs <= 0:
+        return {}
+    stats: dict[str, float] = {}
+    data: dict[str, np.ndarray] | None = None
+    for round_ in range(pre.dagger_rounds + 1):
+        learner = None
+        if round_ > 0:
+            learner = {"actor_state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
+                       "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
+        # Seeds of their own, below the evaluation seeds and apart from PPO's episodes.
+        tasks = [DayTask(env_config, training_seed(900_000 + cfg.seed * 1000 + round_ * 100 + d),
+                         pre.day_steps, pre.teacher, pre.rollout_horizon, learner)
+                 for d in range(pre.days)]
+        tag = "demonstrations" if round_ == 0 else f"DAgger round {round_}"
+        log(f"{tag}: {pre.days} days, {'the ' + pre.teacher if learner is None else 'the actor'} "
+            f"drives, the {pre.teacher} teacher labels ({pre.workers} workers)")
+        new, metrics = collect(tasks, pre.workers, log, tag)
+        stats[f"round_{round_}_reward"] = float(np.mean([m["total_reward"] for m in metrics]))
+        data = new if data is None else {k: np.concatenate([data[k], new[k]]) for k in data}
+        actor_device = next(actor.parameters()).device
+        actor.to("cpu")
+        stats.update(fit_actor(actor, data, pre.epochs, pre.batch_size, pre.learning_rate,
+                               cfg.seed + round_, log, tag))
+        actor.to(actor_device)
+    return stats

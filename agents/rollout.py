@@ -1,0 +1,143 @@
+"""A look-ahead planner: one step of policy improvement over the expert dispatcher.
+
+For the vehicle whose turn it is, each candidate action is tried in a copy of the simulator
+(:meth:`VertiportSim.snapshot` / :meth:`~VertiportSim.restore`), the dispatcher then runs the
+whole fleet for ``horizon - 1`` more steps, and the action with the largest sum of rewards is
+taken (the rollout algorithm of approximate dynamic programming: in expectation it does at least
+as well as the policy it rolls out, up to the horizon's truncation).
+
+It is a *model-based* controller: it reads the true simulator state, not only the observation,
+and simulates ``horizon`` steps per candidate (tens of milliseconds a decision). Training uses
+it as the teacher whose decisions the GCN actor learns to imitate from observations alone
+(``pretrain.teacher: rollout``); ``make evaluate AGENTS=rollout`` scores it like any agent.
+
+Rollouts draw the future (new flight plans, gusts, failures) from a generator of their own,
+the same for every candidate of a decision (common random numbers), never from the env's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agents.base import Controller
+from agents.heuristic import DispatcherController
+from marl_vertiport.sim.core import HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE, VertiportSim
+from marl_vertiport.sim.layout import HOVER_SPOT
+from marl_vertiport.spaces import ObservationBuilder
+
+
+class RolloutPlanner(Controller):
+    """Chooses, among the legal actions of a vehicle on the ground or hovering, the one whose
+    dispatcher rollout earns the most reward; in transit it acts as the dispatcher.
+
+    Args:
+        horizon: steps simulated per candidate action, the candidate's own step included.
+        terminal_turns: turns per vehicle over which the state at the horizon is valued
+            (:meth:`terminal_value`; 0: none).
+        min_takeoff_battery_pct: least charge for a take-off to be a candidate (the dispatcher's
+            charge for a trip); the dispatcher's own choice is always kept as a fallback.
+        seed: seed of the rollouts' generator (combined with the env's step count).
+        base: the controller rolled out (default: the expert dispatcher).
+
+    Call :meth:`bind` with the simulator of the env it acts in before the first ``act``
+    (the episode runners in :mod:`agents.base` do this for any controller with ``bind``).
+    """
+
+    name = "rollout"
+
+    def __init__(self, horizon: int = 40, terminal_turns: float = 30.0,
+                 min_takeoff_battery_pct: float = 80.0, seed: int = 0,
+                 base: Controller | None = None) -> None:
+        if horizon < 1:
+            raise ValueError(f"horizon must be >= 1 step, got {horizon}")
+        if terminal_turns < 0:
+            raise ValueError(f"terminal_turns must be >= 0, got {terminal_turns}")
+        self.horizon = int(horizon)
+        self.terminal_turns = float(terminal_turns)
+        self.min_takeoff_battery_pct = float(min_takeoff_battery_pct)
+        self.seed = int(seed)
+        self.base = base if base is not None else DispatcherController()
+        self.sim: VertiportSim | None = None
+        self._scratch: VertiportSim | None = None
+        self._builder: ObservationBuilder | None = None
+
+    def bind(self, sim: VertiportSim) -> None:
+        """Plan for the env whose simulator is ``sim`` (a scratch copy is built once per config)."""
+        if self._scratch is None or self._scratch.cfg != sim.cfg:
+            if self._scratch is not None:
+                self._scratch.close()
+            self._scratch = VertiportSim(sim.cfg)
+            self._builder = ObservationBuilder(self._scratch)
+        self.sim = sim
+
+    def candidates(self, sim: VertiportSim) -> list[int]:
+        """Actions worth simulating for the acting vehicle: every legal action on the ground,
+        except a take-off with less than ``min_takeoff_battery_pct`` (whose cost, a vehicle
+        stranded on its way back, mostly falls beyond the horizon); when hovering, staying and
+        landing (moves to another hover spot are left out)."""
+        v = sim.acting
+        legal = np.flatnonzero(sim.action_mask(v))
+        if sim.battery[v] < self.min_takeoff_battery_pct:
+            legal = legal[legal != sim.actions.takeoff]
+        if sim.status[v] == HOVERING:
+            hover_moves = 2 + np.flatnonzero(sim.layout.node_type == HOVER_SPOT)
+            legal = legal[~np.isin(legal, hover_moves)]
+        return legal.tolist()
+
+    def q_values(self, sim: VertiportSim) -> dict[int, float]:
+        """Sum of rewards over the horizon for each candidate action of the acting vehicle."""
+        scratch, builder, base = self._scratch, self._builder, self.base
+        assert scratch is not None and builder is not None
+        snap = sim.snapshot()
+        q: dict[int, float] = {}
+        for a in self.candidates(sim):
+            scratch.restore(snap)
+            scratch.rng = np.random.default_rng((self.seed, sim.step_count))
+            total, _ = scratch.step(a)
+            for _ in range(self.horizon - 1):
+                if scratch.truncated:
+                    break
+                reward, _ = scratch.step(base.act(builder.observe(scratch.acting)))
+                total += reward
+            q[a] = total + self.terminal_value(scratch)
+        return q
+
+    def terminal_value(self, sim: VertiportSim) -> float:
+        """What the rest of the day is worth beyond the horizon, estimated as each vehicle's
+        battery and delay terms held at their values at the horizon for its next
+        ``terminal_turns`` turns (fewer near the end of the day). A vehicle out of service
+        earns the worst of both for good, so a decision that strands a vehicle just before the
+        horizon ends is charged for the rest of its day, not for a few steps."""
+        rw = sim.cfg.reward
+        mag = rw.term_magnitude
+        turns = min(self.terminal_turns, (sim.cfg.schedule.episode_steps - sim.step_count) / sim.n)
+        if turns <= 0:
+            return 0.0
+        lam = np.where(sim.battery >= rw.battery_threshold_pct, mag * sim.battery / 100.0, -mag)
+        beta = -mag + 2.0 * mag * np.exp(-sim.delay)
+        beta[sim.status == OUT_OF_SERVICE] = -mag
+        return float(turns * (rw.battery_weight * lam.sum() + rw.delay_weight * beta.sum()))
+
+    def act(self, observation: dict) -> int:
+        sim = self.sim
+        if sim is None:
+            raise RuntimeError("RolloutPlanner needs the simulator: call bind(env.unwrapped.sim) "
+                               "first (the episode runners of agents.base do)")
+        fallback = self.base.act(observation)
+        v = sim.acting
+        if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING):
+            return fallback
+        if not np.array_equal(observation["action_mask"], sim.action_mask(v)):
+            raise RuntimeError("RolloutPlanner: the observation is not that of the bound env's "
+                               "acting vehicle")
+        q = self.q_values(sim)
+        if len(q) < 2:
+            return fallback
+        best = max(q, key=q.get)
+        # Keep the dispatcher's choice unless another action is strictly better.
+        return fallback if fallback in q and q[fallback] >= q[best] else int(best)
+
+    def close(self) -> None:
+        if self._scratch is not None:
+            self._scratch.close()
+            self._scratch = None

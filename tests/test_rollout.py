@@ -1,0 +1,73 @@
+"""The look-ahead planner: it leaves the real env untouched, takes only legal actions, values
+the horizon's end as documented, and beats the dispatcher it rolls out."""
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.base import run_gym_episode
+from agents.heuristic import DispatcherController
+from agents.registry import make_controller
+from agents.rollout import RolloutPlanner
+from conftest import seed0_sim
+from marl_vertiport.gym_env import VertiportEnv
+from marl_vertiport.sim.core import OUT_OF_SERVICE
+
+
+def test_planning_leaves_the_env_untouched_and_acts_legally():
+    env = VertiportEnv("paper")
+    obs, _ = env.reset(seed=4)
+    planner = RolloutPlanner(horizon=6)
+    planner.bind(env.sim)
+    for _ in range(120):
+        before = env.sim.snapshot()
+        action = planner.act(obs)
+        assert obs["action_mask"][action] == 1
+        after = env.sim.snapshot()
+        for key in ("pos", "battery", "status", "node_occupant", "pending_time"):
+            np.testing.assert_array_equal(before[key], after[key])
+        assert before["rng"].bit_generator.state == after["rng"].bit_generator.state
+        obs, *_ = env.step(action)
+    env.close()
+    planner.close()
+
+
+def test_candidates_and_unbound_use():
+    sim = seed0_sim()  # evtol_0 on the charger (100 %), evtol_3 hovering
+    planner = RolloutPlanner(horizon=3, min_takeoff_battery_pct=80.0)
+    planner.bind(sim)
+    assert sim.acting == 0
+    assert planner.candidates(sim) == [0, 1]  # stay, take off (both normal ports are taken)
+    sim.battery[0] = 50.0
+    assert planner.candidates(sim) == [0]  # too little charge to be worth a take-off candidate
+    assert set(planner.q_values(sim)) == {0}
+    with pytest.raises(RuntimeError, match="bind"):
+        RolloutPlanner().act({"action_mask": np.ones(14, np.int8)})
+    with pytest.raises(ValueError, match="horizon"):
+        RolloutPlanner(horizon=0)
+    assert make_controller("rollout").name == "rollout"
+    planner.close()
+
+
+def test_terminal_value_by_hand():
+    sim = seed0_sim()
+    planner = RolloutPlanner(terminal_turns=10)
+    sim.battery[:] = [100.0, 50.0, 20.0, 0.0]
+    sim.delay[:] = [0.0, 0.0, 3.0, 0.0]
+    sim.status[3] = OUT_OF_SERVICE
+    # Per turn: battery term 0.35 * (5 + 2.5 - 5 - 5), delay term 0.1 * (5 + 5 + (-5 + 10 e^-3) - 5).
+    per_turn = 0.35 * (5.0 + 2.5 - 5.0 - 5.0) + 0.1 * (5.0 + 5.0 - 5.0 + 10.0 * math.exp(-3.0) - 5.0)
+    assert planner.terminal_value(sim) == pytest.approx(10 * per_turn)
+    sim.step_count = sim.cfg.schedule.episode_steps - 8  # 2 turns of each vehicle left
+    assert planner.terminal_value(sim) == pytest.approx(2 * per_turn)
+    assert RolloutPlanner(terminal_turns=0).terminal_value(sim) == 0.0
+
+
+def test_planner_beats_the_dispatcher_it_rolls_out():
+    env = VertiportEnv("paper", **{"schedule.episode_steps": 480})
+    totals = {}
+    for name, ctl in (("heuristic", DispatcherController()), ("rollout", RolloutPlanner())):
+        totals[name] = sum(run_gym_episode(env, ctl, seed)["total_reward"] for seed in (11, 12))
+    env.close()
+    assert totals["rollout"] > totals["heuristic"] + 100.0
