@@ -30,11 +30,13 @@ from marl_vertiport.sim.physics import FlightPhysics
 ON_PORT, ON_CHARGER, HOVERING, TAXIING, DEPARTING, AWAY, ARRIVING, OUT_OF_SERVICE = range(8)
 STATUS_NAMES = ("on_port", "on_charger", "hovering", "taxiing", "departing", "away", "arriving",
                 "out_of_service")
-_AIRBORNE = np.array([False, False, True, True, True, True, True, False])
-_IN_TRANSIT_INSIDE = np.array([False, False, False, True, True, False, True, False])
+# Per status code (indexed by a Python int on hot paths).
+_AIRBORNE = (False, False, True, True, True, True, True, False)
+_IN_TRANSIT_INSIDE = (False, False, False, True, True, False, True, False)
 
 _DEFLECTION_TOL_M = 1e-4  # engine position vs commanded motion; integration error is ~1e-12
 _SCALAR_PAIRS_MAX = 24  # above this many vehicle pairs the array version of a check is cheaper
+_EXP_MEMO_MAX = 4096  # bound on the memo of exp(-delay) (a config with fractional minutes)
 
 # Schedule status codes (feature ``schedule_status``).
 EARLY, ON_TIME, DELAYED = -1, 0, 1
@@ -160,9 +162,10 @@ class VertiportSim:
         self._touch_m = float(np.sqrt(2 * fl.vehicle_size_m ** 2 + fl.vehicle_height_m ** 2)) + 0.05
         bat = config.battery
         # Battery change per step by status, before the distance flown is known.
-        self._battery_rate = np.where(_AIRBORNE, -bat.hover_drain_pct, 0.0)
-        self._battery_rate[ON_PORT] = -bat.ground_idle_drain_pct
-        self._battery_rate[ON_CHARGER] = bat.charge_pct
+        rate = [-bat.hover_drain_pct if airborne else 0.0 for airborne in _AIRBORNE]
+        rate[ON_PORT] = -bat.ground_idle_drain_pct
+        rate[ON_CHARGER] = bat.charge_pct
+        self._battery_rate = tuple(rate)
         lay = self.layout
         self._port_static = np.zeros((lay.n_nodes, 4), dtype=np.float32)
         self._port_static[:, 1] = lay.node_type
@@ -170,9 +173,12 @@ class VertiportSim:
         self._node_pos = np.column_stack([lay.node_xy_m, lay.node_z_m])
         self._is_port = lay.node_type != HOVER_SPOT
         self._charging_nodes = np.flatnonzero(lay.node_type == CHARGING_PORT)
-        self._no_charger_failure = np.zeros(len(self._charging_nodes), dtype=bool)
         un = config.uncertainty
         self._noisy_obs = un.position_noise_std_m > 0 or un.position_noise_mean_m != 0
+        self._agent_names = tuple(f"evtol_{i}" for i in range(self.n))
+        # exp(-delay) by delay: delays take few distinct values (whole minutes in the shipped
+        # configs), and a memo is cheaper than numpy's exp on a scalar.
+        self._exp_neg_delay: dict[float, float] = {}
         # Everything set so far is fixed for the env's life; what follows is episode state,
         # which snapshot() copies.
         self._static_keys = frozenset(self.__dict__) | {"_static_keys"}
@@ -399,7 +405,7 @@ class VertiportSim:
                 a = int(others[rng.integers(others.size)])
         metrics = self.metrics
         info: dict[str, Any] = {
-            "minute": self.minute, "acting_agent": f"evtol_{v}", "action": a,
+            "minute": self.minute, "acting_agent": self._agent_names[v], "action": a,
             "commanded_action": commanded, "takeoff": False, "good_takeoff": False,
             "takeoff_failed": False, "landing": False, "good_landing": False,
         }
@@ -449,7 +455,7 @@ class VertiportSim:
         # stay / continue: nothing changes.
 
         # ---- advance the world one step
-        status_during = self.status.copy()
+        status_during = self.status.tolist()
         self.prev_pos[:] = self.pos
         gusts = self._move()
         info["gusts"] = gusts
@@ -457,18 +463,26 @@ class VertiportSim:
         info["touchdowns"] = self._process_arrivals()
         for h in sorted(self._holding):
             self._assign_hover_spot(h)
-        charger_failed = self._no_charger_failure
+        failed_nodes: list[int] = []
         if un.charger_failure_prob > 0:
-            charger_failed = rng.random(len(self._charging_nodes)) < un.charger_failure_prob
-        info["charger_failures"] = int(charger_failed.sum())
-        info["battery_depletions"] = self._update_battery(status_during, charger_failed)
+            failed = rng.random(len(self._charging_nodes)) < un.charger_failure_prob
+            failed_nodes = self._charging_nodes[failed].tolist()
+        info["charger_failures"] = len(failed_nodes)
+        info["battery_depletions"] = self._update_battery(status_during, failed_nodes)
         self.minute += self.minutes_per_step
         self.step_count += 1
         self._update_delays()
 
         # ---- reward of the acting vehicle (paper's eq. 2)
-        lam = mag * self.battery[v] / 100.0 if self.battery[v] >= rw.battery_threshold_pct else -mag
-        beta = -mag + 2.0 * mag * float(np.exp(-self.delay[v]))
+        battery = self.battery[v]
+        lam = mag * battery / 100.0 if battery >= rw.battery_threshold_pct else -mag
+        delay = self.delay.item(v)
+        decay = self._exp_neg_delay.get(delay)
+        if decay is None:
+            if len(self._exp_neg_delay) >= _EXP_MEMO_MAX:
+                self._exp_neg_delay.clear()
+            decay = self._exp_neg_delay[delay] = float(np.exp(-delay))
+        beta = -mag + 2.0 * mag * decay
         reward = (rw.takeoff_weight * tau + rw.landing_weight * gamma + rw.battery_weight * lam
                   + rw.delay_weight * beta + rw.safety_weight * safety)
         info["reward_terms"] = {"takeoff": tau, "landing": gamma, "battery": lam, "delay": beta,
@@ -557,13 +571,14 @@ class VertiportSim:
         ahead (``t_min >= 0``) and within the separation distance (eqs. 3-4). The relation is
         symmetric; the safety term of a step uses the acting vehicle's flag.
         """
-        self.plan_vel_xy[:] = 0.0
-        self.conflict[:] = False
-        cand = np.flatnonzero(_IN_TRANSIT_INSIDE[self.status] & self.has_target).tolist()
+        self.plan_vel_xy.fill(0.0)
+        self.conflict.fill(False)
+        cand = [v for v, (s, t) in enumerate(zip(self.status.tolist(), self.has_target.tolist()))
+                if t and _IN_TRANSIT_INSIDE[s]]
         if not cand:
             return
         speed = self.cfg.flight.cruise_speed_mps
-        pos, target = self.pos.tolist(), self.target.tolist()
+        pos, target, leg_alt = self.pos.tolist(), self.target.tolist(), self.leg_alt.tolist()
         vel, start, end = {}, {}, {}
         for v in cand:
             dx, dy = target[v][0] - pos[v][0], target[v][1] - pos[v][1]
@@ -575,7 +590,7 @@ class VertiportSim:
         sep = self.cfg.safety.min_separation_m
         for i, a in enumerate(cand):
             for b in cand[i + 1:]:
-                if abs(self.leg_alt[a] - self.leg_alt[b]) >= sep:
+                if abs(leg_alt[a] - leg_alt[b]) >= sep:
                     continue
                 if segment_distance(start[a], end[a], start[b], end[b]) >= sep:
                     continue
@@ -596,7 +611,7 @@ class VertiportSim:
         calls anyway: for fleets of a few dozen it is several times cheaper than numpy on
         arrays of that size (measured; see docs/performance.md).
         """
-        moving = np.flatnonzero(self.has_target).tolist()
+        moving = self.has_target.nonzero()[0].tolist()
         self._moved, self._moved_m, self._deflected = moving, [], []
         if self._any_cmd_vel:
             self.cmd_vel[:] = 0.0
@@ -773,27 +788,35 @@ class VertiportSim:
         self.metrics.contacts += new_contacts
         return new_losses, new_contacts
 
-    def _update_battery(self, status_during: np.ndarray, charger_failed: np.ndarray) -> int:
+    def _update_battery(self, status_during: list[int], failed_nodes: list[int]) -> int:
+        """Drain or charge every battery for the step; take depleted airborne vehicles out of
+        service. Returns the number of depletions.
+
+        Args:
+            status_during: per vehicle, its status while it moved this step (``N`` ints).
+            failed_nodes: charging nodes whose charger failed this step.
+
+        Scalar per vehicle, as :meth:`_move`: a handful of numpy calls on ``N``-vectors cost
+        more than the loop for fleets of a few dozen."""
         bat = self.cfg.battery
         # Per-status rates, then the vehicles that flew far enough to count as cruising.
-        change = self._battery_rate[status_during]
+        rate = self._battery_rate
+        change = [rate[s] for s in status_during]
         for v, dist in zip(self._moved, self._moved_m):
             if dist >= bat.min_cruise_distance_m:
                 change[v] = -bat.cruise_drain_pct_per_m * dist
-        if charger_failed.any():
+        if failed_nodes:
             # A charger that fails this step leaves its vehicle idling on the ground.
-            failed_nodes = set(self._charging_nodes[charger_failed].tolist())
-            for v in np.flatnonzero(status_during == ON_CHARGER).tolist():
-                if self.node[v] in failed_nodes:
+            node = self.node.tolist()
+            for v, s in enumerate(status_during):
+                if s == ON_CHARGER and node[v] in failed_nodes:
                     change[v] = -bat.ground_idle_drain_pct
-        battery = self.battery
-        np.add(battery, change, out=battery)
-        np.maximum(battery, 0.0, out=battery)
-        np.minimum(battery, 100.0, out=battery)
-        if np.minimum.reduce(battery) > 0.0:
+        level = [min(max(b + c, 0.0), 100.0) for b, c in zip(self.battery.tolist(), change)]
+        self.battery[:] = level
+        if min(level) > 0.0:
             return 0
-        depleted = np.flatnonzero(_AIRBORNE[status_during] & (battery <= 0.0)
-                                  & (self.status != OUT_OF_SERVICE)).tolist()
+        depleted = [v for v, (s, b, now) in enumerate(zip(status_during, level, self.status.tolist()))
+                    if _AIRBORNE[s] and b <= 0.0 and now != OUT_OF_SERVICE]
         for v in depleted:
             self._take_out_of_service(v)
         self.metrics.battery_depletions += len(depleted)
@@ -826,9 +849,14 @@ class VertiportSim:
             self.physics.make_static(v, self.pos[v])
 
     def _update_delays(self) -> None:
-        tol = self.cfg.schedule.on_time_tolerance_min
-        rel = np.subtract(self.minute, self.pending_time, out=self._rel_min)
-        np.multiply(rel, (rel > tol) & (self.pending_kind != NO_OPERATION), out=self.delay)
+        """Minutes since each pending operation's time, and the delay (that lateness beyond the
+        tolerance, else 0), shape ``(N,)``; scalar per vehicle, as :meth:`_update_battery`."""
+        tol, minute = self.cfg.schedule.on_time_tolerance_min, self.minute
+        rel = [minute - t for t in self.pending_time.tolist()]
+        self._rel_min[:] = rel
+        # r * False is r * 0.0, a signed zero, as in the array product with a boolean mask.
+        self.delay[:] = [r * (r > tol and k != NO_OPERATION)
+                         for r, k in zip(rel, self.pending_kind.tolist())]
 
     def _draw_observation_noise(self) -> None:
         if self._noisy_obs:
@@ -848,20 +876,30 @@ class VertiportSim:
         return delayed.astype(np.int64) * DELAYED + early.astype(np.int64) * EARLY
 
     def _evtol_base(self) -> np.ndarray:
+        """eVTOL node features ``(N, 13)`` float32 with ``is_self`` 0, cached until the next step.
+
+        Built row by row from Python floats and converted once: for a fleet of a few dozen this
+        is several times cheaper than a dozen column assignments and the masks of
+        :meth:`schedule_status` (the same float64 values, rounded to float32 the same way)."""
         if self._evtol_cache is None:
-            f = np.empty((self.n, len(EVTOL_FEATURES)), dtype=np.float32)
-            f[:, 0] = self.status
-            f[:, 1] = self.battery
-            f[:, 2] = self.schedule_status()
-            f[:, 3:5] = self.obs_xy
-            f[:, 5] = self.pos[:, 2]
-            f[:, 6:8] = self.plan_vel_xy
-            f[:, 8] = np.where(self.pending_kind != NO_OPERATION, -self._rel_min, 0.0)
-            f[:, 9] = self.delay
-            f[:, 10] = self.conflict
-            f[:, 11] = self.node
-            f[:, 12] = 0.0
-            self._evtol_cache = f
+            tol = self.cfg.schedule.on_time_tolerance_min
+            minute = self.minute
+            rows = []
+            for st, bat, pk, pt, rel, (ox, oy), (_, _, z), (vx, vy), d, c, nd in zip(
+                    self.status.tolist(), self.battery.tolist(), self.pending_kind.tolist(),
+                    self.pending_time.tolist(), self._rel_min.tolist(), self.obs_xy.tolist(),
+                    self.pos.tolist(), self.plan_vel_xy.tolist(), self.delay.tolist(),
+                    self.conflict.tolist(), self.node.tolist()):
+                r = minute - pt
+                if r > tol and pk != NO_OPERATION:
+                    sched = DELAYED
+                elif r < -tol and pk == PENDING_TAKEOFF:
+                    sched = EARLY
+                else:
+                    sched = ON_TIME
+                rows.append((st, bat, sched, ox, oy, z, vx, vy,
+                             -rel if pk != NO_OPERATION else 0.0, d, c, nd, 0.0))
+            self._evtol_cache = np.array(rows, dtype=np.float32)
         return self._evtol_cache
 
     def port_nodes(self) -> np.ndarray:
