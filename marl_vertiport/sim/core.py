@@ -176,6 +176,7 @@ class VertiportSim:
         un = config.uncertainty
         self._noisy_obs = un.position_noise_std_m > 0 or un.position_noise_mean_m != 0
         self._agent_names = tuple(f"evtol_{i}" for i in range(self.n))
+        self._fixed_masks = self._status_masks()
         # exp(-delay) by delay: delays take few distinct values (whole minutes in the shipped
         # configs), and a memo is cheaper than numpy's exp on a scalar.
         self._exp_neg_delay: dict[float, float] = {}
@@ -318,27 +319,39 @@ class VertiportSim:
         cached = self._mask_cache.get(v)
         if cached is not None:
             return cached
-        acts = self.actions
-        mask = np.zeros(acts.n, dtype=np.int8)
-        s = self.status[v]
-        free = self.node_occupant == -1
-        if s == ON_PORT or s == ON_CHARGER:
+        s = self.status.item(v)
+        mask = self._fixed_masks[s]
+        if mask is None:  # on the ground or hovering: the free nodes it may go to
+            acts = self.actions
+            mask = np.zeros(acts.n, dtype=np.int8)
             mask[acts.stay] = 1
-            mask[acts.takeoff] = 1
-            mask[2:2 + self.layout.n_ports] = free[: self.layout.n_ports]
-        elif s == HOVERING:
-            mask[acts.stay] = 1
-            mask[2:2 + self.layout.n_nodes] = free
-        elif s in (TAXIING, DEPARTING, ARRIVING):
-            mask[acts.continue_] = 1
-            mask[acts.avoid] = 1
-        elif s == AWAY:
-            mask[acts.continue_] = 1
-        else:  # out of service
-            mask[acts.stay] = 1
-        mask.setflags(write=False)
+            free = self.node_occupant == -1
+            if s == HOVERING:
+                mask[2:2 + self.layout.n_nodes] = free
+            else:
+                mask[acts.takeoff] = 1
+                mask[2:2 + self.layout.n_ports] = free[: self.layout.n_ports]
+            mask.setflags(write=False)
         self._mask_cache[v] = mask
         return mask
+
+    def _status_masks(self) -> tuple[np.ndarray | None, ...]:
+        """By status code, the read-only mask of a status whose legal actions do not depend on
+        the occupancy of the nodes, or ``None``."""
+        acts = self.actions
+        legal = {TAXIING: (acts.continue_, acts.avoid), DEPARTING: (acts.continue_, acts.avoid),
+                 ARRIVING: (acts.continue_, acts.avoid), AWAY: (acts.continue_,),
+                 OUT_OF_SERVICE: (acts.stay,)}
+        masks: list[np.ndarray | None] = []
+        for status in range(len(STATUS_NAMES)):
+            if status not in legal:
+                masks.append(None)
+                continue
+            mask = np.zeros(acts.n, dtype=np.int8)
+            mask[list(legal[status])] = 1
+            mask.setflags(write=False)
+            masks.append(mask)
+        return tuple(masks)
 
     def has_decision(self, v: int) -> bool:
         return self.status[v] != AWAY and self.status[v] != OUT_OF_SERVICE
@@ -461,8 +474,9 @@ class VertiportSim:
         info["gusts"] = gusts
         info["separation_losses"], info["contacts"] = self._measure_separation()
         info["touchdowns"] = self._process_arrivals()
-        for h in sorted(self._holding):
-            self._assign_hover_spot(h)
+        if self._holding:
+            for h in sorted(self._holding):
+                self._assign_hover_spot(h)
         failed_nodes: list[int] = []
         if un.charger_failure_prob > 0:
             failed = rng.random(len(self._charging_nodes)) < un.charger_failure_prob
