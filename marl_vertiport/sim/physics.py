@@ -126,7 +126,9 @@ class FlightPhysics:
         self._dynamic = np.zeros(n_vehicles, dtype=bool)
         self._colliding = np.ones(n_vehicles, dtype=bool)
         self._scenery_built = False
-        #: Wall-clock seconds spent inside the engine's stepping calls (benchmark accounting).
+        #: Wall-clock seconds spent in the engine's calls since the benchmark last zeroed it:
+        #: stepping (with its velocity and force commands and position reads), contact queries
+        #: and body mode changes.
         self.engine_seconds = 0.0
         #: Number of ``step`` calls that advanced the engine (steps in which bodies moved).
         self.engine_steps = 0
@@ -168,6 +170,7 @@ class FlightPhysics:
     # ------------------------------------------------------------------ body modes
     def make_static(self, i: int, pos: np.ndarray) -> None:
         """Fix vehicle ``i`` at ``pos`` (parked, hovering, or grounded): no integration cost."""
+        start = time.perf_counter()
         cid, b = self.client, self.bodies[i]
         if self._dynamic[i]:
             p.changeDynamics(b, -1, mass=0.0, physicsClientId=cid)
@@ -176,9 +179,11 @@ class FlightPhysics:
             p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
             self._colliding[i] = True
         p.resetBasePositionAndOrientation(b, pos.tolist(), (0, 0, 0, 1), physicsClientId=cid)
+        self.engine_seconds += time.perf_counter() - start
 
     def make_dynamic(self, i: int, pos: np.ndarray | None = None) -> None:
         """Let the engine move vehicle ``i`` (in flight inside the airspace)."""
+        start = time.perf_counter()
         cid, b = self.client, self.bodies[i]
         if not self._colliding[i]:
             p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
@@ -189,9 +194,11 @@ class FlightPhysics:
             p.changeDynamics(b, -1, mass=self.mass_kg, localInertiaDiagonal=self._inertia,
                              physicsClientId=cid)
             self._dynamic[i] = True
+        self.engine_seconds += time.perf_counter() - start
 
     def make_absent(self, i: int) -> None:
         """Take vehicle ``i`` out of the engine (outside the airspace): no contacts, no cost."""
+        start = time.perf_counter()
         cid, b = self.client, self.bodies[i]
         if self._dynamic[i]:
             p.changeDynamics(b, -1, mass=0.0, physicsClientId=cid)
@@ -202,6 +209,7 @@ class FlightPhysics:
         p.resetBasePositionAndOrientation(
             b, [0.0, 0.0, _PARKED_FAR_Z_M - 5.0 * i], (0, 0, 0, 1), physicsClientId=cid
         )
+        self.engine_seconds += time.perf_counter() - start
 
     @property
     def any_dynamic(self) -> bool:
