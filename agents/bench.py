@@ -7,7 +7,11 @@ Measured:
   uncertain configs, the paper's 4 eVTOLs and the 16-eVTOL ``large`` layout: median and spread
   over repeats;
 - in the same runs, the time spent inside the physics engine's calls (stepping, body updates,
-  position reads, contacts) and so the ratio of our own overhead to the engine's cost;
+  position reads, contacts) and so the ratio of our own overhead to the engine's cost, over all
+  steps and over the steps in which bodies move;
+- the engine alone for the same motion: each run's pybullet calls recorded in a second run of
+  the same seed and replayed, timed, in bare pybullet;
+- a cProfile summary of the AEC env on the paper's layout;
 - vectorised throughput of K env copies with supersuit, in one process and over 2 processes;
 - actor inference latency at batch 1 and 64, training throughput (env samples per second) of
   ``make train``'s config, and peak memory of an env and of a training run (separate processes).
@@ -35,26 +39,59 @@ from agents.files import write_atomic
 PAPER_STEPS_PER_S = 5.0  # the paper's AirSim simulator: about 0.2 s per step
 
 
-def _env_run(api: str, config: str, steps: int, seed: int) -> dict[str, float]:
-    """One timed run of ``steps`` env steps with random legal actions."""
+class _EngineCallRecorder:
+    """Stands in for the pybullet module inside :mod:`marl_vertiport.sim.physics` for one run:
+    forwards every call and records it with its arguments, so the run's engine work can be
+    replayed in bare pybullet (:func:`_replay_engine`)."""
+
+    def __init__(self, module: Any) -> None:
+        self._module = module
+        self.calls: list[tuple[Any, tuple, dict]] = []
+
+    def __getattr__(self, name: str) -> Any:
+        attr = getattr(self._module, name)
+        if not callable(attr) or isinstance(attr, type):  # constants and the error class
+            return attr
+        calls = self.calls
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            calls.append((attr, args, kwargs))
+            return attr(*args, **kwargs)
+
+        return call
+
+
+def _env_loop(api: str, config: str, steps: int, seed: int,
+              recorder: _EngineCallRecorder | None = None) -> dict[str, float]:
+    """``steps`` env steps with random legal actions from ``seed``, timed, one process.
+
+    With ``recorder`` the engine calls are recorded (and the timings are not representative);
+    ``first_timed_call`` is then the index of the first call made inside the timed loop."""
     rng = np.random.default_rng(seed)
+    pc = time.perf_counter
+    moving_s = moving_engine_s = 0.0
     if api == "aec":
         from marl_vertiport import vertiport_v0
 
         env = vertiport_v0.env(config=config)
         env.reset(seed=seed)
-        sim = env.unwrapped.sim
-        sim.physics.engine_seconds, sim.physics.engine_steps = 0.0, 0
+        physics = env.unwrapped.sim.physics
+        physics.engine_seconds, physics.engine_steps = 0.0, 0
+        first_call = len(recorder.calls) if recorder else 0
         n = 0
-        start = time.perf_counter()
+        start = pc()
         while n < steps:
             for agent in env.agent_iter():
+                t, engine, engine_steps = pc(), physics.engine_seconds, physics.engine_steps
                 obs, _, term, trunc, _ = env.last()
                 if term or trunc:
                     env.step(None)
                     continue
                 legal = np.flatnonzero(obs["action_mask"])
                 env.step(int(legal[rng.integers(legal.size)]))
+                if physics.engine_steps != engine_steps:
+                    moving_s += pc() - t
+                    moving_engine_s += physics.engine_seconds - engine
                 n += 1
                 if n >= steps:
                     break
@@ -65,22 +102,79 @@ def _env_run(api: str, config: str, steps: int, seed: int) -> dict[str, float]:
 
         env = VertiportEnv(config=config)
         obs, _ = env.reset(seed=seed)
-        sim = env.sim
-        sim.physics.engine_seconds, sim.physics.engine_steps = 0.0, 0
-        start = time.perf_counter()
+        physics = env.sim.physics
+        physics.engine_seconds, physics.engine_steps = 0.0, 0
+        first_call = len(recorder.calls) if recorder else 0
+        start = pc()
         for n in range(steps):
+            t, engine, engine_steps = pc(), physics.engine_seconds, physics.engine_steps
             legal = np.flatnonzero(obs["action_mask"])
             obs, _, _, truncated, _ = env.step(int(legal[rng.integers(legal.size)]))
             if truncated:
                 obs, _ = env.reset(seed=seed + n)
+            if physics.engine_steps != engine_steps:
+                moving_s += pc() - t
+                moving_engine_s += physics.engine_seconds - engine
         n = steps
-    elapsed = time.perf_counter() - start
-    engine, moving_steps = sim.physics.engine_seconds, sim.physics.engine_steps
+    elapsed = pc() - start
+    last_call = len(recorder.calls) if recorder else 0
+    engine, moving_steps = physics.engine_seconds, physics.engine_steps
     env.close()
-    return {"steps_per_s": n / elapsed, "engine_s_per_step": engine / n,
-            "engine_s_per_moving_step": engine / max(moving_steps, 1),
-            "moving_fraction": moving_steps / n,
-            "total_s_per_step": elapsed / n, "overhead_ratio": (elapsed - engine) / max(engine, 1e-12)}
+    return {"steps": n, "elapsed_s": elapsed, "engine_s": engine, "moving_steps": moving_steps,
+            "moving_s": moving_s, "moving_engine_s": moving_engine_s,
+            "first_timed_call": first_call, "last_timed_call": last_call}
+
+
+def _replay_engine(calls: list[tuple[Any, tuple, dict]], first_timed: int, last_timed: int) -> float:
+    """Replay recorded pybullet calls on a fresh client; seconds taken by the calls of the timed
+    loop (``calls[first_timed:last_timed]``), with nothing but a loop around them."""
+    from marl_vertiport.sim import physics as physics_module
+
+    p = physics_module.p
+    client = p.connect(p.DIRECT)
+
+    def on_client(kwargs: dict) -> dict:
+        return dict(kwargs, physicsClientId=client) if "physicsClientId" in kwargs else kwargs
+
+    for fn, args, kwargs in calls[:first_timed]:  # the world as it was when the loop started
+        if fn is not p.connect:
+            fn(*args, **on_client(kwargs))
+    timed = [(fn, args, on_client(kwargs)) for fn, args, kwargs in calls[first_timed:last_timed]]
+    start = time.perf_counter()
+    for fn, args, kwargs in timed:
+        fn(*args, **kwargs)
+    elapsed = time.perf_counter() - start
+    p.disconnect(physicsClientId=client)
+    return elapsed
+
+
+def _env_run(api: str, config: str, steps: int, seed: int) -> dict[str, float]:
+    """One timed run of ``steps`` env steps with random legal actions, and the engine alone
+    replaying the same motion: a second, untimed run of the same seed records its pybullet
+    calls, which are then replayed in bare pybullet and timed."""
+    run = _env_loop(api, config, steps, seed)
+    from marl_vertiport.sim import physics as physics_module
+
+    real = physics_module.p
+    recorder = _EngineCallRecorder(real)
+    physics_module.p = recorder
+    try:
+        recorded = _env_loop(api, config, steps, seed, recorder)
+    finally:
+        physics_module.p = real
+    alone = _replay_engine(recorder.calls, recorded["first_timed_call"], recorded["last_timed_call"])
+    n, elapsed, engine = run["steps"], run["elapsed_s"], run["engine_s"]
+    moving = run["moving_steps"]
+    return {
+        "steps_per_s": n / elapsed, "total_s_per_step": elapsed / n,
+        "engine_s_per_step": engine / n, "engine_s_per_moving_step": engine / max(moving, 1),
+        "moving_fraction": moving / n,
+        "overhead_ratio": (elapsed - engine) / max(engine, 1e-12),
+        "moving_overhead_ratio": (run["moving_s"] - run["moving_engine_s"])
+        / max(run["moving_engine_s"], 1e-12),
+        "engine_alone_s_per_step": alone / n,
+        "overhead_ratio_engine_alone": (elapsed - alone) / max(alone, 1e-12),
+    }
 
 
 def bench_env(steps: int, repeats: int, configs: list[str]) -> list[dict[str, Any]]:
@@ -89,21 +183,54 @@ def bench_env(steps: int, repeats: int, configs: list[str]) -> list[dict[str, An
         for api in ("aec", "single_agent"):
             runs = [_env_run(api, config, steps, seed=1000 * r) for r in range(repeats)]
             rate = [r["steps_per_s"] for r in runs]
+
+            def median(key: str, scale: float = 1.0) -> float:
+                return scale * statistics.median(r[key] for r in runs)
+
             rows.append({
                 "api": api, "config": config, "steps": steps, "repeats": repeats,
                 "steps_per_s_median": statistics.median(rate), "steps_per_s_min": min(rate),
                 "steps_per_s_max": max(rate),
-                "engine_us_per_step": 1e6 * statistics.median(r["engine_s_per_step"] for r in runs),
-                "engine_us_per_moving_step": 1e6 * statistics.median(
-                    r["engine_s_per_moving_step"] for r in runs),
-                "moving_fraction": statistics.median(r["moving_fraction"] for r in runs),
-                "total_us_per_step": 1e6 * statistics.median(r["total_s_per_step"] for r in runs),
-                "overhead_ratio": statistics.median(r["overhead_ratio"] for r in runs),
+                "engine_us_per_step": median("engine_s_per_step", 1e6),
+                "engine_us_per_moving_step": median("engine_s_per_moving_step", 1e6),
+                "engine_alone_us_per_step": median("engine_alone_s_per_step", 1e6),
+                "moving_fraction": median("moving_fraction"),
+                "total_us_per_step": median("total_s_per_step", 1e6),
+                "overhead_ratio": median("overhead_ratio"),
+                "moving_overhead_ratio": median("moving_overhead_ratio"),
+                "overhead_ratio_engine_alone": median("overhead_ratio_engine_alone"),
                 "times_paper": statistics.median(rate) / PAPER_STEPS_PER_S,
             })
             print(f"  env {api:12s} {config:16s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
-                  f"(overhead/engine {rows[-1]['overhead_ratio']:.2f})", file=sys.stderr)
+                  f"(overhead/engine {rows[-1]['overhead_ratio']:.2f}, in steps with motion "
+                  f"{rows[-1]['moving_overhead_ratio']:.2f})", file=sys.stderr)
     return rows
+
+
+def bench_profile(steps: int, top: int = 12) -> dict[str, Any]:
+    """cProfile of one AEC run on the paper's layout: the functions with the largest own time
+    (share of the profiled run's total; cProfile's own cost inflates small calls)."""
+    import cProfile
+    import pstats
+
+    profiler = cProfile.Profile()
+    profiler.enable()
+    _env_loop("aec", "paper", steps, seed=7)
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats
+    total = sum(row[2] for row in stats.values())
+    rows = sorted(stats.items(), key=lambda kv: -kv[1][2])[:top]
+    root = str(Path(__file__).resolve().parents[1])
+    entries = []
+    for (filename, line, name), (_, calls, own, cumulative, _) in rows:
+        if "site-packages" in filename:
+            where = filename.split("site-packages" + os.sep, 1)[1]
+        else:
+            where = filename.replace(root + os.sep, "") if filename.startswith(root) else Path(filename).name
+        label = f"{where}:{line}({name})" if line else name
+        entries.append({"function": label, "calls_per_step": calls / steps,
+                        "own_share": own / total, "cumulative_share": cumulative / total})
+    return {"steps": steps, "top": entries}
 
 
 def bench_vector(steps: int, copies: int) -> list[dict[str, Any]]:
@@ -210,6 +337,7 @@ def bench_env_memory() -> float:
 
 def report(results: dict[str, Any]) -> str:
     env_rows = results["env"]
+    ref = next((r for r in env_rows if (r["api"], r["config"]) == ("single_agent", "paper")), env_rows[0])
     lines = [
         "# Performance",
         "",
@@ -218,24 +346,54 @@ def report(results: dict[str, Any]) -> str:
         "",
         "## Environment steps per second (one process, random legal actions)",
         "",
-        "| API | config | steps/s (median) | min - max | µs per step | engine µs per step | "
-        "steps with motion | engine µs per step with motion | overhead / engine | "
+        "| API | config | steps/s (median) | min - max | µs per step | steps with motion | "
+        "engine µs per step | engine µs per step with motion | engine alone µs per step | "
+        "overhead / engine | overhead / engine, steps with motion | overhead / engine alone | "
         "x the paper's 5 steps/s |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in env_rows:
         lines.append(f"| {r['api']} | {r['config']} | {r['steps_per_s_median']:,.0f} | "
                      f"{r['steps_per_s_min']:,.0f} - {r['steps_per_s_max']:,.0f} | "
-                     f"{r['total_us_per_step']:.0f} | {r['engine_us_per_step']:.0f} | "
-                     f"{100 * r['moving_fraction']:.0f} % | {r['engine_us_per_moving_step']:.0f} | "
-                     f"{r['overhead_ratio']:.2f} | {r['times_paper']:,.0f} |")
+                     f"{r['total_us_per_step']:.0f} | {100 * r['moving_fraction']:.0f} % | "
+                     f"{r['engine_us_per_step']:.1f} | {r['engine_us_per_moving_step']:.0f} | "
+                     f"{r['engine_alone_us_per_step']:.1f} | {r['overhead_ratio']:.2f} | "
+                     f"{r['moving_overhead_ratio']:.2f} | {r['overhead_ratio_engine_alone']:.2f} | "
+                     f"{r['times_paper']:,.0f} |")
     lines += [
         "",
-        f"{env_rows[0]['repeats']} runs of {env_rows[0]['steps']:,} steps each. \"Engine\" is the time inside "
-        "pybullet's calls during the same runs (velocity commands, gust forces, stepping at "
-        ">= 48 Hz of flight time, position reads, contact queries); \"overhead\" is everything "
-        "else: the simulator's bookkeeping, observations, masks and the API layers.",
+        f"{env_rows[0]['repeats']} runs of {env_rows[0]['steps']:,} steps each; every ratio is "
+        "the median over the runs of the ratio within one run.",
         "",
+        "- **engine**: wall time inside the simulator's pybullet calls during the timed run "
+        "(velocity commands, gust forces, stepping at >= 48 Hz of flight time, position reads, "
+        "contact queries, switching bodies between static, dynamic and absent). The engine is "
+        "stepped only in steps in which a body moves (**steps with motion**).",
+        "- **overhead**: the rest of the run's wall time: the simulator's bookkeeping, "
+        "observations, masks, the API layers and the benchmark's own random choice of a legal "
+        "action (about 3 µs a step).",
+        "- **engine alone**: after each timed run, a second run with the same seed records every "
+        "pybullet call with its arguments; the calls of the timed loop are replayed on a fresh "
+        "pybullet client with nothing around them but a Python loop, and timed. "
+        "**overhead / engine alone** is (run time - replay time) / replay time.",
+        "- **overhead / engine, steps with motion**: the same ratio counting only the steps in "
+        "which the engine was stepped (each step timed on its own).",
+        "",
+    ]
+    prof = results.get("profile")
+    if prof:
+        lines += [
+            f"### Where a step's time goes (cProfile, AEC API, `paper`, {prof['steps']:,} steps)",
+            "",
+            "| function | calls per step | own time | with callees |",
+            "|---|---:|---:|---:|",
+        ]
+        for e in prof["top"]:
+            lines.append(f"| `{e['function']}` | {e['calls_per_step']:.2f} | "
+                         f"{100 * e['own_share']:.1f} % | {100 * e['cumulative_share']:.1f} % |")
+        lines += ["", "Shares of the profiled run's total; the profiler's own cost per call "
+                  "inflates functions that make many small calls.", ""]
+    lines += [
         "## Vectorised copies (supersuit's `gym_vec_env_v0`, single-agent env, random legal actions)",
         "",
         "| copies | processes | env steps/s |",
@@ -256,13 +414,21 @@ def report(results: dict[str, Any]) -> str:
         "",
         "## Reading these numbers",
         "",
-        "- With random legal actions the fleet empties its batteries within the first hours of the "
-        "day (docs/results.md), after which few bodies move: the engine is stepped only when a body "
-        "moves, so its average cost per step is small and the overhead ratio is large (see the share of "
-        "steps with motion and the engine's cost in those steps, 12 substeps each).",
-        "- Our own cost per step is the Python of the step: action check, motion bookkeeping, "
-        "battery, delays, the conflict probe, and, in the AEC API, PettingZoo's wrapper and the "
-        "observation dicts; cProfile shows it spread over many small calls rather than one hot spot.",
+        f"- What bounds the overhead ratio: under random legal actions the fleet empties its "
+        f"batteries within the first hours of the day (docs/results.md) and most vehicles are then "
+        f"out of service, so in {100 - 100 * ref['moving_fraction']:.0f} % of the steps "
+        f"({ref['api']}, {ref['config']}) no body moves and the engine is not asked to do anything, "
+        f"while each step still checks the action, advances batteries, schedules and the conflict "
+        f"probe and builds an observation. Per step on average that is "
+        f"{ref['total_us_per_step'] - ref['engine_us_per_step']:.0f} µs of our own work against "
+        f"{ref['engine_us_per_step']:.1f} µs of engine time; in the steps with motion the engine "
+        f"costs {ref['engine_us_per_moving_step']:.0f} µs (12 substeps) and the ratio is "
+        f"{ref['moving_overhead_ratio']:.2f}.",
+        "- Our own cost is spread over many small calls (see the profile): the simulator's step "
+        "(scalar per-vehicle bookkeeping), the observation (eVTOL features built from Python rows, "
+        "one conversion to float32, copies of the port graph, edges and mask) and, in the AEC API, "
+        "PettingZoo's order-enforcing wrapper (each attribute read goes through two "
+        "`__getattr__`), `last()` and the agent iterator.",
         "- The single-agent API skips the AEC wrappers and reward dicts; the larger fleet costs "
         "less than proportionally more per step (per-vehicle work is a small part of a step).",
         "- Vector envs in one process pay per-copy Python and the stacking of observations; "
@@ -293,6 +459,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     print("benchmarking (each part in turn) ...", file=sys.stderr)
     results["env"] = bench_env(args.steps, args.repeats, args.configs)
+    results["profile"] = bench_profile(args.steps)
     results["vector"] = bench_vector(args.vector_steps, args.copies)
     results["inference"] = bench_inference()
     results["training"] = bench_training(args.train_iterations)

@@ -17,9 +17,34 @@ def test_bench_smoke(tmp_path):
     for row in data["env"]:
         assert row["steps_per_s_min"] <= row["steps_per_s_median"] <= row["steps_per_s_max"]
         assert row["engine_us_per_step"] > 0 and row["overhead_ratio"] > 0
+        assert row["engine_alone_us_per_step"] > 0 and row["overhead_ratio_engine_alone"] > 0
+        assert row["moving_overhead_ratio"] > 0 and 0 < row["moving_fraction"] <= 1
+    assert data["profile"]["top"] and all(0 <= e["own_share"] <= 1 for e in data["profile"]["top"])
     assert [(r["copies"], r["processes"]) for r in data["vector"]] == [(2, 1), (2, 1), (2, 2)]
     assert [r["batch"] for r in data["inference"]] == [1, 64]
     assert data["training"]["env_steps_per_s"] > 0 and data["training"]["peak_memory_mb"] > 0
     assert data["env_peak_memory_mb"] > 0
     text = report.read_text()
-    assert "overhead / engine" in text and "training throughput" in text
+    assert "overhead / engine alone" in text and "training throughput" in text
+    assert "Where a step's time goes" in text
+
+
+def test_engine_replay_repeats_the_recorded_run():
+    """The engine-alone measurement replays the pybullet calls of a run of the same seed: the
+    recorded run steps the engine exactly as often as a plain run does, and its timed calls
+    hold one ``stepSimulation`` per step with motion."""
+    from agents.bench import _EngineCallRecorder, _env_loop, _replay_engine
+    from marl_vertiport.sim import physics as physics_module
+
+    plain = _env_loop("single_agent", "paper", 300, seed=3)
+    real = physics_module.p
+    recorder = _EngineCallRecorder(real)
+    physics_module.p = recorder
+    try:
+        recorded = _env_loop("single_agent", "paper", 300, seed=3, recorder=recorder)
+    finally:
+        physics_module.p = real
+    assert recorded["moving_steps"] == plain["moving_steps"] > 0
+    timed = recorder.calls[recorded["first_timed_call"]:recorded["last_timed_call"]]
+    assert sum(fn is real.stepSimulation for fn, _, _ in timed) == plain["moving_steps"]
+    assert _replay_engine(recorder.calls, recorded["first_timed_call"], recorded["last_timed_call"]) > 0
