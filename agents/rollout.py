@@ -36,6 +36,9 @@ class RolloutPlanner(Controller):
             (:meth:`terminal_value`; 0: none).
         min_takeoff_battery_pct: least charge for a take-off to be a candidate (the dispatcher's
             charge for a trip); the dispatcher's own choice is always kept as a fallback.
+        margin: reward by which another action must beat the dispatcher's choice to replace it
+            (a margin keeps near-ties with the dispatcher, which makes the planner's choices
+            easier to learn from observations).
         seed: seed of the rollouts' generator (combined with the env's step count).
         base: the controller rolled out (default: the expert dispatcher).
 
@@ -46,7 +49,7 @@ class RolloutPlanner(Controller):
     name = "rollout"
 
     def __init__(self, horizon: int = 40, terminal_turns: float = 30.0,
-                 min_takeoff_battery_pct: float = 80.0, seed: int = 0,
+                 min_takeoff_battery_pct: float = 80.0, margin: float = 0.0, seed: int = 0,
                  base: Controller | None = None) -> None:
         if horizon < 1:
             raise ValueError(f"horizon must be >= 1 step, got {horizon}")
@@ -55,6 +58,7 @@ class RolloutPlanner(Controller):
         self.horizon = int(horizon)
         self.terminal_turns = float(terminal_turns)
         self.min_takeoff_battery_pct = float(min_takeoff_battery_pct)
+        self.margin = float(margin)
         self.seed = int(seed)
         self.base = base if base is not None else DispatcherController()
         self.sim: VertiportSim | None = None
@@ -134,8 +138,8 @@ class RolloutPlanner(Controller):
         if len(q) < 2:
             return fallback
         best = max(q, key=q.get)
-        # Keep the dispatcher's choice unless another action is strictly better.
-        return fallback if fallback in q and q[fallback] >= q[best] else int(best)
+        # Keep the dispatcher's choice unless another action is better by more than the margin.
+        return fallback if fallback in q and q[fallback] + self.margin >= q[best] else int(best)
 
     def close(self) -> None:
         if self._scratch is not None:

@@ -45,16 +45,17 @@ class DayTask:
     steps: int
     teacher: str
     rollout_horizon: int
+    rollout_margin: float = 0.0
     learner: dict[str, Any] | None = None
     """Checkpoint content of the actor that drives (DAgger); ``None``: the teacher drives."""
 
 
-def make_teacher(name: str, rollout_horizon: int, seed: int):
+def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: int):
     from agents.heuristic import DispatcherController
     from agents.rollout import RolloutPlanner
 
     if name == "rollout":
-        return RolloutPlanner(horizon=rollout_horizon, seed=seed)
+        return RolloutPlanner(horizon=rollout_horizon, margin=rollout_margin, seed=seed)
     if name == "heuristic":
         return DispatcherController()
     raise ValueError(f"teacher {name!r}: use one of {TEACHERS}")
@@ -69,7 +70,7 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
 
     torch.set_num_threads(1)
     env = VertiportEnv(config=from_dict(task.env_config))
-    teacher = make_teacher(task.teacher, task.rollout_horizon, task.seed)
+    teacher = make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed)
     learner = GCNController(task.learner) if task.learner is not None else None
     obs, _ = env.reset(seed=task.seed)
     if hasattr(teacher, "bind"):
@@ -182,7 +183,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
                        "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
         # Seeds of their own, below the evaluation seeds and apart from PPO's episodes.
         tasks = [DayTask(env_config, training_seed(900_000 + cfg.seed * 1000 + round_ * 100 + d),
-                         pre.day_steps, pre.teacher, pre.rollout_horizon, learner)
+                         pre.day_steps, pre.teacher, pre.rollout_horizon, pre.rollout_margin, learner)
                  for d in range(pre.days)]
         tag = "demonstrations" if round_ == 0 else f"DAgger round {round_}"
         log(f"{tag}: {pre.days} days, {'the ' + pre.teacher if learner is None else 'the actor'} "

@@ -58,6 +58,9 @@ class PretrainConfig:
     """``rollout`` (the look-ahead planner) or ``heuristic`` (the expert dispatcher)."""
     rollout_horizon: int = 40
     """Steps the rollout teacher simulates per candidate action."""
+    rollout_margin: float = 3.0
+    """Reward by which the rollout teacher's best action must beat the dispatcher's to be the
+    label (near-ties keep the dispatcher's choice, which is easier to learn)."""
     workers: int = 2
     """Processes that run demonstration days."""
     epochs: int = 6
