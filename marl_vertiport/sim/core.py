@@ -479,8 +479,9 @@ class VertiportSim:
                 self._assign_hover_spot(h)
         failed_nodes: list[int] = []
         if un.charger_failure_prob > 0:
-            failed = rng.random(len(self._charging_nodes)) < un.charger_failure_prob
-            failed_nodes = self._charging_nodes[failed].tolist()
+            draws = rng.random(len(self._charging_nodes)).tolist()
+            failed_nodes = [node for node, u in zip(self._charging_nodes.tolist(), draws)
+                            if u < un.charger_failure_prob]
         info["charger_failures"] = len(failed_nodes)
         info["battery_depletions"] = self._update_battery(status_during, failed_nodes)
         self.minute += self.minutes_per_step
@@ -825,12 +826,18 @@ class VertiportSim:
             for v, s in enumerate(status_during):
                 if s == ON_CHARGER and node[v] in failed_nodes:
                     change[v] = -bat.ground_idle_drain_pct
-        level = [min(max(b + c, 0.0), 100.0) for b, c in zip(self.battery.tolist(), change)]
+        level = self.battery.tolist()
+        empty = []
+        for v, c in enumerate(change):
+            b = level[v] + c
+            level[v] = b = 0.0 if b < 0.0 else 100.0 if b > 100.0 else b  # clipped to [0, 100]
+            if b <= 0.0 and _AIRBORNE[status_during[v]]:
+                empty.append(v)
         self.battery[:] = level
-        if min(level) > 0.0:
+        if not empty:
             return 0
-        depleted = [v for v, (s, b, now) in enumerate(zip(status_during, level, self.status.tolist()))
-                    if _AIRBORNE[s] and b <= 0.0 and now != OUT_OF_SERVICE]
+        status = self.status.tolist()
+        depleted = [v for v in empty if status[v] != OUT_OF_SERVICE]
         for v in depleted:
             self._take_out_of_service(v)
         self.metrics.battery_depletions += len(depleted)
@@ -864,10 +871,9 @@ class VertiportSim:
 
     def _update_delays(self) -> None:
         """Minutes since each pending operation's time, and the delay (that lateness beyond the
-        tolerance, else 0), shape ``(N,)``; scalar per vehicle, as :meth:`_update_battery`."""
-        tol, minute = self.cfg.schedule.on_time_tolerance_min, self.minute
-        rel = [minute - t for t in self.pending_time.tolist()]
-        self._rel_min[:] = rel
+        tolerance, else 0), shape ``(N,)``."""
+        tol = self.cfg.schedule.on_time_tolerance_min
+        rel = np.subtract(self.minute, self.pending_time, out=self._rel_min).tolist()
         # r * False is r * 0.0, a signed zero, as in the array product with a boolean mask.
         self.delay[:] = [r * (r > tol and k != NO_OPERATION)
                          for r, k in zip(rel, self.pending_kind.tolist())]
