@@ -126,17 +126,18 @@ class raw_env(AECEnv):
         if self.agent_name_mapping[agent] != self.sim.acting:  # pragma: no cover - invariant
             raise RuntimeError(f"{agent} acts out of turn (turn of evtol_{self.sim.acting})")
         reward, info = self.sim.step(action)  # raises before any change on an illegal action
-        self._cumulative_rewards[agent] = 0.0
         if self._last_rewarded is not None:
             self.rewards[self._last_rewarded] = 0.0
         self.rewards[agent] = reward
         self._last_rewarded = agent
+        # The acting agent's reward is the only one that is not 0, so accumulating the rewards
+        # (PettingZoo's _accumulate_rewards) changes only its sum, which restarts at this step.
+        self._cumulative_rewards[agent] = 0.0 + reward
         if self.sim.truncated:
             info = dict(info, episode=self.sim.episode_metrics())
             self.truncations = dict.fromkeys(self.agents, True)
         self.infos = dict.fromkeys(self.agents, info)
         self.agent_selection = self.possible_agents[self.sim.acting]
-        self._accumulate_rewards()
         if self.render_mode == "human":
             self.render()
 
