@@ -874,7 +874,7 @@ class VertiportSim:
         tolerance, else 0), shape ``(N,)``."""
         tol = self.cfg.schedule.on_time_tolerance_min
         rel = np.subtract(self.minute, self.pending_time, out=self._rel_min).tolist()
-        # r * False is r * 0.0, a signed zero, as in the array product with a boolean mask.
+        # r * False is r * 0.0: -0.0 while an operation is not yet due, as the features show.
         self.delay[:] = [r * (r > tol and k != NO_OPERATION)
                          for r, k in zip(rel, self.pending_kind.tolist())]
 
@@ -898,9 +898,9 @@ class VertiportSim:
     def _evtol_base(self) -> np.ndarray:
         """eVTOL node features ``(N, 13)`` float32 with ``is_self`` 0, cached until the next step.
 
-        Built row by row from Python floats and converted once: for a fleet of a few dozen this
-        is several times cheaper than a dozen column assignments and the masks of
-        :meth:`schedule_status` (the same float64 values, rounded to float32 the same way)."""
+        Built row by row from Python floats and converted to float32 in one call: for a fleet of
+        a few dozen this is several times cheaper than a dozen column assignments and the array
+        masks of :meth:`schedule_status`, which gives the same column."""
         if self._evtol_cache is None:
             tol = self.cfg.schedule.on_time_tolerance_min
             minute = self.minute
