@@ -898,13 +898,14 @@ class VertiportSim:
     def _evtol_base(self) -> np.ndarray:
         """eVTOL node features ``(N, 13)`` float32 with ``is_self`` 0, cached until the next step.
 
-        Built row by row from Python floats and converted to float32 in one call: for a fleet of
-        a few dozen this is several times cheaper than a dozen column assignments and the array
-        masks of :meth:`schedule_status`, which gives the same column."""
+        Built as one flat list of Python numbers, converted to float32 in one call (a flat list
+        converts about twice as fast as nested rows): for the paper's 4 vehicles about a third
+        of the cost of a dozen column assignments and the array masks of
+        :meth:`schedule_status` (which gives the same column), for 16 about the same cost."""
         if self._evtol_cache is None:
             tol = self.cfg.schedule.on_time_tolerance_min
             minute = self.minute
-            rows = []
+            values: list[float] = []
             for st, bat, pk, pt, rel, (ox, oy), (_, _, z), (vx, vy), d, c, nd in zip(
                     self.status.tolist(), self.battery.tolist(), self.pending_kind.tolist(),
                     self.pending_time.tolist(), self._rel_min.tolist(), self.obs_xy.tolist(),
@@ -917,9 +918,9 @@ class VertiportSim:
                     sched = EARLY
                 else:
                     sched = ON_TIME
-                rows.append((st, bat, sched, ox, oy, z, vx, vy,
-                             -rel if pk != NO_OPERATION else 0.0, d, c, nd, 0.0))
-            self._evtol_cache = np.array(rows, dtype=np.float32)
+                values += (st, bat, sched, ox, oy, z, vx, vy,
+                           -rel if pk != NO_OPERATION else 0.0, d, c, nd, 0.0)
+            self._evtol_cache = np.array(values, dtype=np.float32).reshape(self.n, len(EVTOL_FEATURES))
         return self._evtol_cache
 
     def port_nodes(self) -> np.ndarray:
