@@ -36,6 +36,11 @@ class RolloutPlanner(Controller):
             (:meth:`terminal_value`; 0: none).
         min_takeoff_battery_pct: least charge for a take-off to be a candidate (the dispatcher's
             charge for a trip); the dispatcher's own choice is always kept as a fallback.
+        min_hover_battery_pct: at or below this charge a hovering vehicle lands if it can
+            (staying is not a candidate; the dispatcher's reserve).
+        stranding_penalty: cost, beyond the reward, of each vehicle that a rollout leaves out of
+            service or empty: the planner does not buy reward for the rest of the fleet by
+            sacrificing a vehicle (an emergency landing), which the reward alone can favour.
         margin: reward by which another action must beat the dispatcher's choice to replace it
             (a margin keeps near-ties with the dispatcher, which makes the planner's choices
             easier to learn from observations).
@@ -49,7 +54,9 @@ class RolloutPlanner(Controller):
     name = "rollout"
 
     def __init__(self, horizon: int = 40, terminal_turns: float = 30.0,
-                 min_takeoff_battery_pct: float = 80.0, margin: float = 0.0, seed: int = 0,
+                 min_takeoff_battery_pct: float = 80.0, margin: float = 0.0,
+                 min_hover_battery_pct: float = 24.0, stranding_penalty: float = 1000.0,
+                 seed: int = 0,
                  base: Controller | None = None) -> None:
         if horizon < 1:
             raise ValueError(f"horizon must be >= 1 step, got {horizon}")
@@ -59,9 +66,13 @@ class RolloutPlanner(Controller):
         self.terminal_turns = float(terminal_turns)
         self.min_takeoff_battery_pct = float(min_takeoff_battery_pct)
         self.margin = float(margin)
+        self.stranding_penalty = float(stranding_penalty)
+        self.min_hover_battery_pct = float(min_hover_battery_pct)
         self.seed = int(seed)
         self.base = base if base is not None else DispatcherController()
         self.sim: VertiportSim | None = None
+        #: The candidates' values of the last decision (empty where none was simulated).
+        self.last_q: dict[int, float] = {}
         self._scratch: VertiportSim | None = None
         self._builder: ObservationBuilder | None = None
 
@@ -78,7 +89,8 @@ class RolloutPlanner(Controller):
         """Actions worth simulating for the acting vehicle: every legal action on the ground,
         except a take-off with less than ``min_takeoff_battery_pct`` (whose cost, a vehicle
         stranded on its way back, mostly falls beyond the horizon); when hovering, staying and
-        landing (moves to another hover spot are left out)."""
+        landing (moves to another hover spot are left out), and only landing once the charge
+        is down to ``min_hover_battery_pct``."""
         v = sim.acting
         legal = np.flatnonzero(sim.action_mask(v))
         if sim.battery[v] < self.min_takeoff_battery_pct:
@@ -86,6 +98,8 @@ class RolloutPlanner(Controller):
         if sim.status[v] == HOVERING:
             hover_moves = 2 + np.flatnonzero(sim.layout.node_type == HOVER_SPOT)
             legal = legal[~np.isin(legal, hover_moves)]
+            if sim.battery[v] <= self.min_hover_battery_pct and legal.size > 1:
+                legal = legal[legal != sim.actions.stay]  # low: land now, wherever is free
         return legal.tolist()
 
     def q_values(self, sim: VertiportSim) -> dict[int, float]:
@@ -103,8 +117,15 @@ class RolloutPlanner(Controller):
                     break
                 reward, _ = scratch.step(base.act(builder.observe(scratch.acting)))
                 total += reward
-            q[a] = total + self.terminal_value(scratch)
+            stranded = self.stranded(scratch) - self.stranded(sim)
+            q[a] = total + self.terminal_value(scratch) - self.stranding_penalty * stranded
         return q
+
+    @staticmethod
+    def stranded(sim: VertiportSim) -> int:
+        """Vehicles out of service (depleted in the air) or with an empty battery on the ground."""
+        empty = (sim.battery <= 0.0) & (sim.status != ON_CHARGER)
+        return int(np.count_nonzero((sim.status == OUT_OF_SERVICE) | empty))
 
     def terminal_value(self, sim: VertiportSim) -> float:
         """What the rest of the day is worth beyond the horizon, estimated as each vehicle's
@@ -128,13 +149,14 @@ class RolloutPlanner(Controller):
             raise RuntimeError("RolloutPlanner needs the simulator: call bind(env.unwrapped.sim) "
                                "first (the episode runners of agents.base do)")
         fallback = self.base.act(observation)
+        self.last_q = {}
         v = sim.acting
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING):
             return fallback
         if not np.array_equal(observation["action_mask"], sim.action_mask(v)):
             raise RuntimeError("RolloutPlanner: the observation is not that of the bound env's "
                                "acting vehicle")
-        q = self.q_values(sim)
+        q = self.last_q = self.q_values(sim)
         if len(q) < 2:
             return fallback
         best = max(q, key=q.get)

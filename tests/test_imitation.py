@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from agents.gcn.imitation import DayTask, collect, fit_actor, label_day, make_teacher
+from agents.gcn.imitation import (
+    DayTask, collect, fit_actor, label_day, label_weights, make_teacher,
+)
 from agents.gcn.models import GraphActor
 from agents.gcn.policy import GCNController
 from agents.gcn.training import TrainConfig, feature_names
@@ -21,6 +23,10 @@ def test_demonstration_day_keeps_choices_with_legal_labels():
     assert data["evtol_nodes"].shape == (n, 4, 13) and data["port_nodes"].shape == (n, 10, 4)
     assert (data["action_mask"].sum(axis=1) > 1).all()  # only steps with a choice
     assert data["action_mask"][np.arange(n), data["label"]].all()  # every label legal
+    assert data["regret"].shape == (n,) and (data["regret"] >= 0).all()
+    assert (data["regret"] > 0).any()  # the planner simulated some decisions
+    np.testing.assert_allclose(label_weights(np.array([0.0, 3.0, 500.0]), 50.0), [1.0, 4.0, 51.0])
+    np.testing.assert_allclose(label_weights(np.array([0.0, 3.0]), 0.0), [1.0, 1.0])
 
 
 def test_fit_then_learner_drives_a_dagger_day():
@@ -34,7 +40,7 @@ def test_fit_then_learner_drives_a_dagger_day():
     probe.close()
     actor = GraphActor(example, {"actor": ["port_nodes", "evtol_nodes", "self"]}, "actor", 1,
                        feature_names("observation"), hidden=16, hidden_dims=[32])
-    first = fit_actor(actor, data, 1, 64, 1e-3, 0, lambda *_: None, "bc")
+    first = fit_actor(actor, data, 1, 64, 1e-3, 0, lambda *_: None, "bc", regret_cap=50.0)
     last = fit_actor(actor, data, 20, 64, 1e-3, 0, lambda *_: None, "bc")
     assert last["cross_entropy"] < first["cross_entropy"] and last["accuracy"] > 0.8
     cfg = to_dict(TrainConfig())

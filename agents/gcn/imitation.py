@@ -77,6 +77,7 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         teacher.bind(env.sim)
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
     labels: list[int] = []
+    weights: list[float] = []
     for _ in range(task.steps):
         mask = obs["action_mask"]
         if int(mask.sum()) > 1:
@@ -85,6 +86,9 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
                 rows[key].append(obs["observation"][key])
             rows["action_mask"].append(mask)
             labels.append(label)
+            q = getattr(teacher, "last_q", None)
+            # What a wrong choice here can cost: the spread of the simulated candidates' values.
+            weights.append(max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0)
         else:
             label = int(np.argmax(mask))
         action = label if learner is None or int(mask.sum()) == 1 else learner.act(obs)
@@ -97,6 +101,7 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         teacher.close()
     data = {k: np.stack(v) for k, v in rows.items()}
     data["label"] = np.asarray(labels, dtype=np.int64)
+    data["regret"] = np.asarray(weights, dtype=np.float32)
     return data, metrics
 
 
@@ -132,13 +137,23 @@ def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
     return TensorDict(out, batch_size=[len(data["label"])])
 
 
+def label_weights(regret: np.ndarray, cap: float) -> np.ndarray:
+    """Per-decision weights of the imitation loss: ``1 + min(regret, cap)``, where ``regret`` is
+    the spread of the teacher's simulated values over the candidates (0 where it simulated
+    none). Decisions whose wrong choice costs much (a vehicle left to drain, a take-off out of
+    its window) count more than near-ties (cost-sensitive imitation, as in AggreVaTe)."""
+    return 1.0 + np.minimum(regret, cap)
+
+
 def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, learning_rate: float,
-              seed: int, log: Callable[[str], None], tag: str) -> dict[str, float]:
-    """Cross-entropy of the actor's masked softmax on the teacher's labels."""
+              seed: int, log: Callable[[str], None], tag: str, regret_cap: float = 0.0) -> dict[str, float]:
+    """Cross-entropy of the actor's masked softmax on the teacher's labels, each decision
+    weighted by :func:`label_weights` (``regret_cap`` 0: all weights 1)."""
     from agents.gcn.distribution import masked_logits
 
     obs = to_tensordict(data)
     target = torch.from_numpy(data["label"])
+    weight = torch.from_numpy(label_weights(data["regret"], regret_cap)).float()
     opt = torch.optim.Adam(actor.parameters(), lr=learning_rate)
     gen = torch.Generator().manual_seed(seed)
     n = len(target)
@@ -151,12 +166,13 @@ def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, 
             idx = perm[i:i + batch_size]
             batch = obs[idx]
             logp = torch.log_softmax(masked_logits(actor.logits(batch), batch["action_mask"]), dim=-1)
-            ce = -logp.gather(-1, target[idx].unsqueeze(-1)).mean()
+            w = weight[idx]
+            ce = -(logp.gather(-1, target[idx].unsqueeze(-1)).squeeze(-1) * w).sum() / w.sum()
             opt.zero_grad()
             ce.backward()
             torch.nn.utils.clip_grad_norm_(actor.parameters(), 1.0)
             opt.step()
-            ce_sum += float(ce.detach()) * len(idx)
+            ce_sum += float(ce.detach()) * len(idx)  # weighted cross-entropy, per decision
             acc_sum += float((logp.argmax(-1) == target[idx]).float().sum())
         stats = {"cross_entropy": ce_sum / n, "accuracy": acc_sum / n, "samples": float(n)}
         log(f"  {tag} epoch {epoch + 1}/{epochs}: cross-entropy {stats['cross_entropy']:.3f}, "
@@ -194,6 +210,6 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
         actor_device = next(actor.parameters()).device
         actor.to("cpu")
         stats.update(fit_actor(actor, data, pre.epochs, pre.batch_size, pre.learning_rate,
-                               cfg.seed + round_, log, tag))
+                               cfg.seed + round_, log, tag, pre.regret_cap))
         actor.to(actor_device)
     return stats

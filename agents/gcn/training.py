@@ -65,6 +65,9 @@ class PretrainConfig:
     """Processes that run demonstration days."""
     epochs: int = 6
     """Passes over the demonstrations after each round."""
+    regret_cap: float = 0.0
+    """Weights of the imitation loss: 1 + the teacher's value spread over the candidates,
+    capped at this (0: every decision weighs 1); see ``imitation.label_weights``."""
     batch_size: int = 1024
     learning_rate: float = 1e-3
     dagger_rounds: int = 0
@@ -146,6 +149,7 @@ class TrainConfig:
             (self.pretrain.teacher in ("rollout", "heuristic"), "pretrain.teacher", "rollout or heuristic"),
             (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
             (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
+            (self.pretrain.regret_cap >= 0, "pretrain.regret_cap", "must be >= 0"),
             (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
             (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),
         ]
