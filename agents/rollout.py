@@ -73,6 +73,9 @@ class RolloutPlanner(Controller):
         self.sim: VertiportSim | None = None
         #: The candidates' values of the last decision (empty where none was simulated).
         self.last_q: dict[int, float] = {}
+        #: Whether the last decision had a legal action ruled out as unsafe (staying aloft
+        #: with a low battery), so that the choice carried the cost of a stranded vehicle.
+        self.last_forced = False
         self._scratch: VertiportSim | None = None
         self._builder: ObservationBuilder | None = None
 
@@ -100,6 +103,7 @@ class RolloutPlanner(Controller):
             legal = legal[~np.isin(legal, hover_moves)]
             if sim.battery[v] <= self.min_hover_battery_pct and legal.size > 1:
                 legal = legal[legal != sim.actions.stay]  # low: land now, wherever is free
+                self.last_forced = True
         return legal.tolist()
 
     def q_values(self, sim: VertiportSim) -> dict[int, float]:
@@ -149,7 +153,7 @@ class RolloutPlanner(Controller):
             raise RuntimeError("RolloutPlanner needs the simulator: call bind(env.unwrapped.sim) "
                                "first (the episode runners of agents.base do)")
         fallback = self.base.act(observation)
-        self.last_q = {}
+        self.last_q, self.last_forced = {}, False
         v = sim.acting
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING):
             return fallback

@@ -25,7 +25,7 @@ def test_demonstration_day_keeps_choices_with_legal_labels():
     assert data["action_mask"][np.arange(n), data["label"]].all()  # every label legal
     assert data["regret"].shape == (n,) and (data["regret"] >= 0).all()
     assert (data["regret"] > 0).any()  # the planner simulated some decisions
-    np.testing.assert_allclose(label_weights(np.array([0.0, 3.0, 500.0]), 50.0), [1.0, 4.0, 51.0])
+    np.testing.assert_allclose(label_weights(np.array([0.0, 3.0, 500.0, np.inf]), 50.0), [1.0, 4.0, 51.0, 51.0])
     np.testing.assert_allclose(label_weights(np.array([0.0, 3.0]), 0.0), [1.0, 1.0])
 
 

@@ -42,6 +42,11 @@ def test_candidates_and_unbound_use():
     sim.battery[0] = 50.0
     assert planner.candidates(sim) == [0]  # too little charge to be worth a take-off candidate
     assert set(planner.q_values(sim)) == {0}
+    sim.acting = 3  # hovering: stay or land on a free port
+    sim.node_occupant[0], sim.node[2] = -1, -1  # free normal port 0 for the test
+    assert planner.candidates(sim) == [0, 2] and not planner.last_forced
+    sim.battery[3] = 20.0  # at the reserve: staying aloft is ruled out
+    assert planner.candidates(sim) == [2] and planner.last_forced
     with pytest.raises(RuntimeError, match="bind"):
         RolloutPlanner().act({"action_mask": np.ones(14, np.int8)})
     with pytest.raises(ValueError, match="horizon"):

@@ -11,8 +11,9 @@ Teachers (``pretrain.teacher``):
 
 Days of demonstrations run in worker processes, one day per task, through the Gymnasium env:
 the acting eVTOL's observation there is exactly what that eVTOL observes as an AEC agent, so
-the same data trains the actor of both training modes. Only steps with a choice (two or more
-legal actions) are kept: the others teach nothing. In round 0 the teacher drives; in each DAgger
+the same data trains the actor of both training modes. Each round runs ``days`` full days and
+``starts`` shorter episodes of a day's first ``start_steps`` steps. Only steps with a choice
+(two or more legal actions) are kept: the others teach nothing. In round 0 the teacher drives; in each DAgger
 round the current actor drives (greedily) and the teacher labels the states the actor visits,
 and the actor is refit on everything collected so far.
 """
@@ -87,8 +88,12 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
             rows["action_mask"].append(mask)
             labels.append(label)
             q = getattr(teacher, "last_q", None)
-            # What a wrong choice here can cost: the spread of the simulated candidates' values.
-            weights.append(max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0)
+            # What a wrong choice here can cost: the spread of the simulated candidates' values,
+            # or without bound where the teacher ruled an action out as unsafe.
+            if getattr(teacher, "last_forced", False):
+                weights.append(float("inf"))
+            else:
+                weights.append(max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0)
         else:
             label = int(np.argmax(mask))
         action = label if learner is None or int(mask.sum()) == 1 else learner.act(obs)
@@ -114,8 +119,8 @@ def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag:
     def report(result) -> None:
         results.append(result)
         m = result[1]
-        log(f"  {tag}: day {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
-            f"reward {m.get('total_reward', float('nan')):.0f}, "
+        log(f"  {tag}: episode {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
+            f"{m.get('steps', 0)} steps, reward {m.get('total_reward', float('nan')):.0f}, "
             f"depletions {m.get('battery_depletions', 0)}, {len(result[0]['label'])} decisions")
 
     if workers <= 1:
@@ -140,7 +145,7 @@ def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
 def label_weights(regret: np.ndarray, cap: float) -> np.ndarray:
     """Per-decision weights of the imitation loss: ``1 + min(regret, cap)``, where ``regret`` is
     the spread of the teacher's simulated values over the candidates (0 where it simulated
-    none). Decisions whose wrong choice costs much (a vehicle left to drain, a take-off out of
+    none, infinite where it ruled a legal action out as unsafe). Decisions whose wrong choice costs much (a vehicle left to drain, a take-off out of
     its window) count more than near-ties (cost-sensitive imitation, as in AggreVaTe)."""
     return 1.0 + np.minimum(regret, cap)
 
@@ -197,15 +202,20 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
         if round_ > 0:
             learner = {"actor_state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
                        "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
-        # Seeds of their own, below the evaluation seeds and apart from PPO's episodes.
-        tasks = [DayTask(env_config, training_seed(900_000 + cfg.seed * 1000 + round_ * 100 + d),
-                         pre.day_steps, pre.teacher, pre.rollout_horizon, pre.rollout_margin, learner)
-                 for d in range(pre.days)]
+        # Seeds of their own, below the evaluation seeds and apart from PPO's episodes: full
+        # days, then the first minutes of more days (the start of a day, all batteries full and
+        # every vehicle placed at random, is where an imitation's early error costs most).
+        base = 900_000 + cfg.seed * 1000 + round_ * 100
+        lengths = [pre.day_steps] * pre.days + [pre.start_steps] * pre.starts
+        tasks = [DayTask(env_config, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
+                         pre.rollout_margin, learner) for d, steps in enumerate(lengths)]
         tag = "demonstrations" if round_ == 0 else f"DAgger round {round_}"
-        log(f"{tag}: {pre.days} days, {'the ' + pre.teacher if learner is None else 'the actor'} "
-            f"drives, the {pre.teacher} teacher labels ({pre.workers} workers)")
+        log(f"{tag}: {pre.days} days and {pre.starts} day starts of {pre.start_steps} steps, "
+            f"{'the ' + pre.teacher if learner is None else 'the actor'} drives, the "
+            f"{pre.teacher} teacher labels ({pre.workers} workers)")
         new, metrics = collect(tasks, pre.workers, log, tag)
-        stats[f"round_{round_}_reward"] = float(np.mean([m["total_reward"] for m in metrics]))
+        days = [m["total_reward"] for m in metrics if m["steps"] == pre.day_steps] or [float("nan")]
+        stats[f"round_{round_}_reward"] = float(np.mean(days))
         data = new if data is None else {k: np.concatenate([data[k], new[k]]) for k in data}
         actor_device = next(actor.parameters()).device
         actor.to("cpu")

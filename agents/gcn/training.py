@@ -54,6 +54,10 @@ class PretrainConfig:
     """Days of demonstrations per round (0: no warm start)."""
     day_steps: int = 1440
     """Steps of each demonstration day (a full day: 1440)."""
+    starts: int = 0
+    """Extra episodes per round that cover only the start of a day."""
+    start_steps: int = 120
+    """Steps of each of those episodes."""
     teacher: str = "rollout"
     """``rollout`` (the look-ahead planner) or ``heuristic`` (the expert dispatcher)."""
     rollout_horizon: int = 40
@@ -146,6 +150,8 @@ class TrainConfig:
             (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
              "pretrain", "days, epochs and dagger_rounds must be >= 0"),
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
+            (self.pretrain.starts >= 0 and self.pretrain.start_steps >= 1, "pretrain.starts",
+             "starts must be >= 0 and start_steps >= 1"),
             (self.pretrain.teacher in ("rollout", "heuristic"), "pretrain.teacher", "rollout or heuristic"),
             (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
             (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
