@@ -170,7 +170,10 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
                                       "batch_size": 64, "learning_rate": 1e-3, "dagger_rounds": 1})
     final = train(cfg, tmp_path, log=lambda *_: None, evaluate=False)
     assert final.name == "model_1.pt" and (tmp_path / "model_0.pt").exists()
-    assert (tmp_path / "model_warmstart.pt").exists()
+    warm = torch.load(tmp_path / "model_warmstart.pt", weights_only=False)["infos"]["warm_start"]
+    # Two fits (behaviour cloning, one DAgger round), each scored; the best one is kept.
+    assert {"fit_0_score", "fit_1_score"} <= set(warm) and "fit_2_score" not in warm
+    assert warm["chosen_fit"] == max((0, 1), key=lambda k: warm[f"fit_{k}_score"])
     assert (tmp_path / "curves.csv").exists() and (tmp_path / "learning_curves.png").exists()
     assert not list(tmp_path.glob("*.tmp"))
     ctl = GCNController(final)

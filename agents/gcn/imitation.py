@@ -185,41 +185,62 @@ def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, 
     return stats
 
 
+def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
+    """The actor's weights as checkpoint content a worker can load (see GCNController)."""
+    from marl_vertiport.config import to_dict
+
+    return {"actor_state_dict": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()},
+            "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
+
+
 def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None] = print
                ) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
-    docstring); ``cfg`` is the :class:`~agents.gcn.training.TrainConfig`. Returns the last fit's
-    statistics and the mean reward of each round's days."""
-    from marl_vertiport.config import to_dict
+    docstring); ``cfg`` is the :class:`~agents.gcn.training.TrainConfig`.
 
+    Each fit's actor is scored by the mean reward of the full days it drives in the next round
+    (the last one by a round of days of its own, not fit on); the actor keeps the weights of
+    the best-scoring fit, as DAgger prescribes (it returns the best of its iterates, not
+    necessarily the last). Returns the last fit's statistics and each fit's score."""
     pre = cfg.pretrain
     if pre.days <= 0 or pre.epochs <= 0:
         return {}
     stats: dict[str, float] = {}
     data: dict[str, np.ndarray] | None = None
-    for round_ in range(pre.dagger_rounds + 1):
-        learner = None
-        if round_ > 0:
-            learner = {"actor_state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
-                       "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
+    fits: list[dict[str, Any]] = []
+    scores: list[float] = []
+    for round_ in range(pre.dagger_rounds + 2):
+        last = round_ == pre.dagger_rounds + 1  # scores the last fit; nothing is refit
+        learner = fits[-1] if fits else None
         # Seeds of their own, below the evaluation seeds and apart from PPO's episodes: full
         # days, then the first minutes of more days (the start of a day, all batteries full and
         # every vehicle placed at random, is where an imitation's early error costs most).
         base = 900_000 + cfg.seed * 1000 + round_ * 100
-        lengths = [pre.day_steps] * pre.days + [pre.start_steps] * pre.starts
+        lengths = [pre.day_steps] * pre.days + ([] if last else [pre.start_steps] * pre.starts)
         tasks = [DayTask(env_config, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
                          pre.rollout_margin, learner) for d, steps in enumerate(lengths)]
-        tag = "demonstrations" if round_ == 0 else f"DAgger round {round_}"
-        log(f"{tag}: {pre.days} days and {pre.starts} day starts of {pre.start_steps} steps, "
-            f"{'the ' + pre.teacher if learner is None else 'the actor'} drives, the "
+        tag = ("scoring the last fit" if last else "demonstrations" if round_ == 0
+               else f"DAgger round {round_}")
+        log(f"{tag}: {pre.days} days and {len(lengths) - pre.days} day starts of {pre.start_steps} "
+            f"steps, {'the ' + pre.teacher if learner is None else 'the actor'} drives, the "
             f"{pre.teacher} teacher labels ({pre.workers} workers)")
         new, metrics = collect(tasks, pre.workers, log, tag)
         days = [m["total_reward"] for m in metrics if m["steps"] == pre.day_steps] or [float("nan")]
         stats[f"round_{round_}_reward"] = float(np.mean(days))
+        if learner is not None:
+            scores.append(float(np.mean(days)))
+            log(f"  fit {len(scores) - 1} scores {scores[-1]:.0f} (mean reward of its days)")
+        if last:
+            break
         data = new if data is None else {k: np.concatenate([data[k], new[k]]) for k in data}
         actor_device = next(actor.parameters()).device
         actor.to("cpu")
         stats.update(fit_actor(actor, data, pre.epochs, pre.batch_size, pre.learning_rate,
                                cfg.seed + round_, log, tag, pre.regret_cap))
         actor.to(actor_device)
+        fits.append(_learner(actor, env_config, cfg))
+    best = int(np.nanargmax(scores))
+    actor.load_state_dict(fits[best]["actor_state_dict"])
+    stats.update({f"fit_{k}_score": v for k, v in enumerate(scores)}, chosen_fit=float(best))
+    log(f"warm start: keeping fit {best} of {len(fits)} (score {scores[best]:.0f})")
     return stats
