@@ -42,21 +42,31 @@ PAPER_STEPS_PER_S = 5.0  # the paper's AirSim simulator: about 0.2 s per step
 class _EngineCallRecorder:
     """Stands in for the pybullet module inside :mod:`marl_vertiport.sim.physics` for one run:
     forwards every call and records it with its arguments, so the run's engine work can be
-    replayed in bare pybullet (:func:`_replay_engine`)."""
+    replayed in bare pybullet (:func:`_replay_engine`). Only calls on the clients opened during
+    the recording are kept, and no disconnection: another env of the process that is
+    garbage-collected meanwhile disconnects its own client through the same module, which is not
+    this run's work (the replay opens and closes a client of its own)."""
 
     def __init__(self, module: Any) -> None:
         self._module = module
         self.calls: list[tuple[Any, tuple, dict]] = []
+        self.clients: set[int] = set()
 
     def __getattr__(self, name: str) -> Any:
         attr = getattr(self._module, name)
         if not callable(attr) or isinstance(attr, type):  # constants and the error class
             return attr
-        calls = self.calls
+        calls, clients = self.calls, self.clients
+        connect, disconnect = self._module.connect, self._module.disconnect
 
         def call(*args: Any, **kwargs: Any) -> Any:
-            calls.append((attr, args, kwargs))
-            return attr(*args, **kwargs)
+            result = attr(*args, **kwargs)
+            if attr is connect:
+                clients.add(result)
+                calls.append((attr, args, kwargs))
+            elif attr is not disconnect and kwargs.get("physicsClientId") in clients:
+                calls.append((attr, args, kwargs))
+            return result
 
         return call
 

@@ -48,3 +48,26 @@ def test_engine_replay_repeats_the_recorded_run():
     timed = recorder.calls[recorded["first_timed_call"]:recorded["last_timed_call"]]
     assert sum(fn is real.stepSimulation for fn, _, _ in timed) == plain["moving_steps"]
     assert _replay_engine(recorder.calls, recorded["first_timed_call"], recorded["last_timed_call"]) > 0
+
+
+def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeypatch):
+    """An env built elsewhere in the process and garbage-collected while a run is recorded
+    disconnects its own client through the recorded module; the replay must not follow it."""
+    import gc
+
+    import agents.bench as bench
+    from marl_vertiport.gym_env import VertiportEnv
+
+    others = [VertiportEnv("paper") for _ in range(2)]
+    plain_loop, runs = bench._env_loop, []
+
+    def loop(*args, **kwargs):
+        runs.append(1)
+        if len(runs) == 2:  # the recorded run
+            others.clear()
+            gc.collect()
+        return plain_loop(*args, **kwargs)
+
+    monkeypatch.setattr(bench, "_env_loop", loop)
+    result = bench._env_run("aec", "paper", 100, seed=0)
+    assert len(runs) == 2 and result["engine_alone_s_per_step"] > 0
