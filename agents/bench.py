@@ -188,32 +188,40 @@ def _env_run(api: str, config: str, steps: int, seed: int) -> dict[str, float]:
 
 
 def bench_env(steps: int, repeats: int, configs: list[str]) -> list[dict[str, Any]]:
+    """Every (config, API) measurement ``repeats`` times, the repeats interleaved (round ``r``
+    runs every measurement once) so that a drift of the machine's speed over the benchmark
+    spreads over all measurements instead of biasing the ones that happen to run late."""
+    cases = [(config, api) for config in configs for api in ("aec", "single_agent")]
+    runs: dict[tuple[str, str], list[dict[str, float]]] = {case: [] for case in cases}
+    for r in range(repeats):
+        for config, api in cases:
+            runs[(config, api)].append(_env_run(api, config, steps, seed=1000 * r))
+        print(f"  env round {r + 1}/{repeats} done", file=sys.stderr)
     rows = []
-    for config in configs:
-        for api in ("aec", "single_agent"):
-            runs = [_env_run(api, config, steps, seed=1000 * r) for r in range(repeats)]
-            rate = [r["steps_per_s"] for r in runs]
+    for config, api in cases:
+        case_runs = runs[(config, api)]
+        rate = [run["steps_per_s"] for run in case_runs]
 
-            def median(key: str, scale: float = 1.0) -> float:
-                return scale * statistics.median(r[key] for r in runs)
+        def median(key: str, scale: float = 1.0) -> float:
+            return scale * statistics.median(run[key] for run in case_runs)
 
-            rows.append({
-                "api": api, "config": config, "steps": steps, "repeats": repeats,
-                "steps_per_s_median": statistics.median(rate), "steps_per_s_min": min(rate),
-                "steps_per_s_max": max(rate),
-                "engine_us_per_step": median("engine_s_per_step", 1e6),
-                "engine_us_per_moving_step": median("engine_s_per_moving_step", 1e6),
-                "engine_alone_us_per_step": median("engine_alone_s_per_step", 1e6),
-                "moving_fraction": median("moving_fraction"),
-                "total_us_per_step": median("total_s_per_step", 1e6),
-                "overhead_ratio": median("overhead_ratio"),
-                "moving_overhead_ratio": median("moving_overhead_ratio"),
-                "overhead_ratio_engine_alone": median("overhead_ratio_engine_alone"),
-                "times_paper": statistics.median(rate) / PAPER_STEPS_PER_S,
-            })
-            print(f"  env {api:12s} {config:16s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
-                  f"(overhead/engine {rows[-1]['overhead_ratio']:.2f}, in steps with motion "
-                  f"{rows[-1]['moving_overhead_ratio']:.2f})", file=sys.stderr)
+        rows.append({
+            "api": api, "config": config, "steps": steps, "repeats": repeats,
+            "steps_per_s_median": statistics.median(rate), "steps_per_s_min": min(rate),
+            "steps_per_s_max": max(rate),
+            "engine_us_per_step": median("engine_s_per_step", 1e6),
+            "engine_us_per_moving_step": median("engine_s_per_moving_step", 1e6),
+            "engine_alone_us_per_step": median("engine_alone_s_per_step", 1e6),
+            "moving_fraction": median("moving_fraction"),
+            "total_us_per_step": median("total_s_per_step", 1e6),
+            "overhead_ratio": median("overhead_ratio"),
+            "moving_overhead_ratio": median("moving_overhead_ratio"),
+            "overhead_ratio_engine_alone": median("overhead_ratio_engine_alone"),
+            "times_paper": statistics.median(rate) / PAPER_STEPS_PER_S,
+        })
+        print(f"  env {api:12s} {config:16s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
+              f"(overhead/engine {rows[-1]['overhead_ratio']:.2f}, in steps with motion "
+              f"{rows[-1]['moving_overhead_ratio']:.2f})", file=sys.stderr)
     return rows
 
 
@@ -375,8 +383,10 @@ def report(results: dict[str, Any]) -> str:
                      f"{r['times_paper']:,.0f} |")
     lines += [
         "",
-        f"{env_rows[0]['repeats']} runs of {env_rows[0]['steps']:,} steps each; every ratio is "
-        "the median over the runs of the ratio within one run.",
+        f"{env_rows[0]['repeats']} runs of {env_rows[0]['steps']:,} steps each, in interleaved "
+        "rounds (each round runs every row once); every ratio is the median over the runs of "
+        "the ratio within one run. On this kind of virtual machine the same run varies by up to "
+        "a third from one minute to the next: read the min - max column.",
         "",
         "- **engine**: wall time inside the simulator's pybullet calls during the timed run "
         "(velocity commands, gust forces, stepping at >= 48 Hz of flight time, position reads, "
