@@ -138,14 +138,15 @@ class RolloutPlanner(Controller):
         earns the worst of both for good, so a decision that strands a vehicle just before the
         horizon ends is charged for the rest of its day, not for a few steps."""
         rw = sim.cfg.reward
-        mag = rw.term_magnitude
         turns = min(self.terminal_turns, (sim.cfg.schedule.episode_steps - sim.step_count) / sim.n)
         if turns <= 0:
             return 0.0
-        lam = np.where(sim.battery >= rw.battery_threshold_pct, mag * sim.battery / 100.0, -mag)
-        beta = -mag + 2.0 * mag * np.exp(-sim.delay)
-        beta[sim.status == OUT_OF_SERVICE] = -mag
-        return float(turns * (rw.battery_weight * lam.sum() + rw.delay_weight * beta.sum()))
+        lam_sum = beta_sum = 0.0
+        for v in range(sim.n):
+            lam, beta = sim.battery_delay_terms(v)
+            lam_sum += lam
+            beta_sum += -rw.term_magnitude if sim.status[v] == OUT_OF_SERVICE else beta
+        return float(turns * (rw.battery_weight * lam_sum + rw.delay_weight * beta_sum))
 
     def act(self, observation: dict) -> int:
         sim = self.sim

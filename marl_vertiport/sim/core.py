@@ -489,15 +489,7 @@ class VertiportSim:
         self._update_delays()
 
         # ---- reward of the acting vehicle (paper's eq. 2)
-        battery = self.battery[v]
-        lam = mag * battery / 100.0 if battery >= rw.battery_threshold_pct else -mag
-        delay = self.delay.item(v)
-        decay = self._exp_neg_delay.get(delay)
-        if decay is None:
-            if len(self._exp_neg_delay) >= _EXP_MEMO_MAX:
-                self._exp_neg_delay.clear()
-            decay = self._exp_neg_delay[delay] = float(np.exp(-delay))
-        beta = -mag + 2.0 * mag * decay
+        lam, beta = self.battery_delay_terms(v)
         reward = (rw.takeoff_weight * tau + rw.landing_weight * gamma + rw.battery_weight * lam
                   + rw.delay_weight * beta + rw.safety_weight * safety)
         info["reward_terms"] = {"takeoff": tau, "landing": gamma, "battery": lam, "delay": beta,
@@ -516,6 +508,21 @@ class VertiportSim:
         self._draw_observation_noise()
         self.last_info = info
         return float(reward), info
+
+    def battery_delay_terms(self, v: int) -> tuple[float, float]:
+        """The paper's battery term lambda and delay term beta of vehicle ``v`` now, before
+        their weights: ``5 b / 100`` (or -5 below the threshold) and ``-5 + 10 exp(-delay)``."""
+        rw = self.cfg.reward
+        mag = rw.term_magnitude
+        battery = self.battery[v]
+        lam = mag * battery / 100.0 if battery >= rw.battery_threshold_pct else -mag
+        delay = self.delay.item(v)
+        decay = self._exp_neg_delay.get(delay)
+        if decay is None:
+            if len(self._exp_neg_delay) >= _EXP_MEMO_MAX:
+                self._exp_neg_delay.clear()
+            decay = self._exp_neg_delay[delay] = float(np.exp(-delay))
+        return lam, -mag + 2.0 * mag * decay
 
     @property
     def truncated(self) -> bool:
