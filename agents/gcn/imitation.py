@@ -13,9 +13,9 @@ Days of demonstrations run in worker processes, one day per task, through the Gy
 the acting eVTOL's observation there is exactly what that eVTOL observes as an AEC agent, so
 the same data trains the actor of both training modes. Each round runs ``days`` full days and
 ``starts`` shorter episodes of a day's first ``start_steps`` steps. Only steps with a choice
-(two or more legal actions) are kept: the others teach nothing. In round 0 the teacher drives; in each DAgger
-round the current actor drives (greedily) and the teacher labels the states the actor visits,
-and the actor is refit on everything collected so far.
+(two or more legal actions) are kept: the others teach nothing. In round 0 the teacher drives;
+in each DAgger round the current actor drives (greedily) and the teacher labels the states the
+actor visits, and the actor is refit on everything collected so far.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from tensordict import TensorDict
 
 from agents.seeds import training_seed
 
-#: Observation groups the actor reads, and their dtypes in the collected data.
+#: Observation groups the actor reads (the first three are its features, the last its mask).
 ACTOR_GROUPS = ("port_nodes", "evtol_nodes", "self", "action_mask")
 TEACHERS = ("rollout", "heuristic")
 
@@ -81,7 +81,8 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     weights: list[float] = []
     for _ in range(task.steps):
         mask = obs["action_mask"]
-        if int(mask.sum()) > 1:
+        choice = int(mask.sum()) > 1
+        if choice:
             label = int(teacher.act(obs))
             for key in ACTOR_GROUPS[:3]:
                 rows[key].append(obs["observation"][key])
@@ -96,7 +97,7 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
                 weights.append(max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0)
         else:
             label = int(np.argmax(mask))
-        action = label if learner is None or int(mask.sum()) == 1 else learner.act(obs)
+        action = learner.act(obs) if learner is not None and choice else label
         obs, _, _, truncated, _ = env.step(action)
         if truncated:
             break
@@ -145,8 +146,9 @@ def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
 def label_weights(regret: np.ndarray, cap: float) -> np.ndarray:
     """Per-decision weights of the imitation loss: ``1 + min(regret, cap)``, where ``regret`` is
     the spread of the teacher's simulated values over the candidates (0 where it simulated
-    none, infinite where it ruled a legal action out as unsafe). Decisions whose wrong choice costs much (a vehicle left to drain, a take-off out of
-    its window) count more than near-ties (cost-sensitive imitation, as in AggreVaTe)."""
+    none, infinite where it ruled a legal action out as unsafe). Decisions whose wrong choice
+    costs much (a vehicle left to drain, a take-off out of its window) count more than
+    near-ties (cost-sensitive imitation, as in AggreVaTe)."""
     return 1.0 + np.minimum(regret, cap)
 
 
@@ -201,7 +203,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
     Each fit's actor is scored by the mean reward of the full days it drives in the next round
     (the last one by a round of days of its own, not fit on); the actor keeps the weights of
     the best-scoring fit, as DAgger prescribes (it returns the best of its iterates, not
-    necessarily the last). Returns the last fit's statistics and each fit's score."""
+    necessarily the last). Returns the last fit's statistics, the teacher's mean reward on the
+    days it drives, each fit's score and the fit kept."""
     pre = cfg.pretrain
     if pre.days <= 0 or pre.epochs <= 0:
         return {}
@@ -226,8 +229,9 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
             f"{pre.teacher} teacher labels ({pre.workers} workers)")
         new, metrics = collect(tasks, pre.workers, log, tag)
         days = [m["total_reward"] for m in metrics if m["steps"] == pre.day_steps] or [float("nan")]
-        stats[f"round_{round_}_reward"] = float(np.mean(days))
-        if learner is not None:
+        if learner is None:
+            stats["teacher_reward"] = float(np.mean(days))
+        else:
             scores.append(float(np.mean(days)))
             log(f"  fit {len(scores) - 1} scores {scores[-1]:.0f} (mean reward of its days)")
         if last:
