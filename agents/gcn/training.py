@@ -30,7 +30,7 @@ import torch
 import yaml
 
 from agents.files import write_atomic
-from agents.gcn.imitation import warm_start
+from agents.gcn.imitation import TEACHERS, warm_start
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.sim.core import (
     CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
@@ -152,7 +152,7 @@ class TrainConfig:
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
             (self.pretrain.starts >= 0 and self.pretrain.start_steps >= 1, "pretrain.starts",
              "starts must be >= 0 and start_steps >= 1"),
-            (self.pretrain.teacher in ("rollout", "heuristic"), "pretrain.teacher", "rollout or heuristic"),
+            (self.pretrain.teacher in TEACHERS, "pretrain.teacher", f"one of {', '.join(TEACHERS)}"),
             (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
             (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
             (self.pretrain.regret_cap >= 0, "pretrain.regret_cap", "must be >= 0"),
