@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 import torch
 from tensordict import TensorDict
@@ -18,7 +19,7 @@ from agents.gcn.training import (
     TrainConfig, TrainingDiverged, feature_names, latest_checkpoint, runner_config, train,
 )
 from agents.gcn.vec_env import POLICY_GROUPS, STATE_GROUPS, MultiAgentVecEnv, SingleAgentVecEnv
-from marl_vertiport.config import build_dataclass, to_dict
+from marl_vertiport.config import build_dataclass, load_config, to_dict
 
 torch.set_num_threads(1)
 
@@ -156,8 +157,6 @@ def test_one_ppo_iteration_same_update_in_both_modes_on_the_same_observations():
 
 
 def build_env_cfg():
-    from marl_vertiport.config import load_config
-
     return load_config("paper", fleet_size=1)
 
 
@@ -253,3 +252,51 @@ def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
     cfg_short = build_dataclass(TrainConfig, {**cfg, "iterations": done + 2})
     final = train(cfg_short, run, resume=True, log=lambda *_: None, evaluate=False)
     assert final.name == f"model_{done + 1}.pt"
+
+
+def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
+    """A run stopped after the warm start's first round goes on from its saved progress and
+    ends with the same warm-started actor as a run never stopped."""
+    import agents.gcn.imitation as imitation
+    from agents.gcn.training import WARM_STATE, read_curves
+
+    cfg = tiny_config("single_agent", iterations=1,
+                      pretrain={"days": 1, "day_steps": 24, "starts": 1, "start_steps": 12,
+                                "low_battery_starts": 1, "noise": 0.2, "teacher": "heuristic",
+                                "workers": 1, "epochs": 1, "batch_size": 64,
+                                "learning_rate": 1e-3, "dagger_rounds": 1})
+    train(cfg, tmp_path / "whole", log=lambda *_: None, evaluate=False)
+    original = imitation.fit_actor
+    calls = []
+
+    def stop_at_second_fit(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(imitation, "fit_actor", stop_at_second_fit)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "cut", log=lambda *_: None, evaluate=False)
+    monkeypatch.setattr(imitation, "fit_actor", original)
+    assert (tmp_path / "cut" / WARM_STATE).exists() and latest_checkpoint(tmp_path / "cut") is None
+    assert len(read_curves(tmp_path / "cut" / "warmstart.csv")) == 1
+    lines = []
+    train(cfg, tmp_path / "cut", resume=True, log=lines.append, evaluate=False)
+    assert any("resuming after round 0" in line for line in lines)
+    whole = torch.load(tmp_path / "whole" / "model_warmstart.pt", weights_only=False)
+    cut = torch.load(tmp_path / "cut" / "model_warmstart.pt", weights_only=False)
+    assert whole["infos"]["warm_start"] == cut["infos"]["warm_start"]
+    for key, value in whole["actor_state_dict"].items():
+        assert torch.equal(value, cut["actor_state_dict"][key]), key
+    rows = read_curves(tmp_path / "cut" / "warmstart.csv")
+    assert [r["round"] for r in rows] == [0.0, 1.0, 2.0] and rows[0]["driver"] == 0.0
+    np.testing.assert_equal(rows, read_curves(tmp_path / "whole" / "warmstart.csv"))  # NaN == NaN
+    # Progress made with another configuration is refused, naming the file.
+    other = build_dataclass(TrainConfig, {**to_dict(cfg), "seed": 5})
+    with pytest.raises(ValueError, match="another configuration"):
+        imitation.warm_start(None, other, to_dict(load_config("paper")), log=lambda *_: None,
+                             state_path=tmp_path / "cut" / WARM_STATE)
+    (tmp_path / "cut" / WARM_STATE).write_bytes(b"junk")
+    with pytest.raises(ValueError, match="not a readable warm-start state"):
+        imitation.load_warm_start_state(tmp_path / "cut" / WARM_STATE)

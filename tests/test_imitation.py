@@ -6,12 +6,12 @@ import pytest
 import torch
 
 from agents.gcn.imitation import (
-    DayTask, collect, fit_actor, label_day, label_weights, make_teacher,
+    DayTask, _with_battery, collect, fit_actor, label_day, label_weights, make_teacher,
 )
 from agents.gcn.models import GraphActor
 from agents.gcn.policy import GCNController
 from agents.gcn.training import TrainConfig, feature_names
-from marl_vertiport.config import load_config, to_dict
+from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.vertiport_v0 import raw_env
 
 
@@ -51,3 +51,25 @@ def test_fit_then_learner_drives_a_dagger_day():
     assert metrics["steps"] == 40 and len(dagger["label"]) > 0
     with pytest.raises(ValueError, match="teacher"):
         make_teacher("oracle", 4, 0.0, 0)
+
+
+def test_noise_changes_the_path_not_the_labels_and_low_battery_starts():
+    env_cfg = to_dict(load_config("paper"))
+    clean, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4))
+    noisy, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4, noise=0.5))
+    again, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4, noise=0.5))
+    # Random actions take the day elsewhere; the same seed draws the same ones.
+    assert not np.array_equal(clean["evtol_nodes"][:20], noisy["evtol_nodes"][:20])
+    np.testing.assert_array_equal(noisy["label"], again["label"])
+    assert noisy["action_mask"][np.arange(len(noisy["label"])), noisy["label"]].all()
+    low = _with_battery(env_cfg, 45.0)
+    assert env_cfg["battery"]["initial_pct"] == 100.0 and low["battery"]["initial_pct"] == 45.0
+    env = raw_env(config=load_config(low))
+    env.reset(seed=0)
+    assert (env.unwrapped.sim.battery == 45.0).all()
+    env.close()
+    base = to_dict(TrainConfig())
+    for key, value in (("noise", 1.0), ("low_battery_pct", []), ("low_battery_starts", 101)):
+        bad = {**base, "pretrain": {**base["pretrain"], key: value}}
+        with pytest.raises(ConfigError, match="pretrain"):
+            build_dataclass(TrainConfig, bad)

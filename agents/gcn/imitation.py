@@ -20,16 +20,20 @@ actor visits, and the actor is refit on everything collected so far.
 
 from __future__ import annotations
 
+import dataclasses
+import io
 import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 import torch
 from tensordict import TensorDict
 
+from agents.files import write_atomic
 from agents.seeds import training_seed
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).
@@ -49,6 +53,9 @@ class DayTask:
     rollout_margin: float = 0.0
     learner: dict[str, Any] | None = None
     """Checkpoint content of the actor that drives (DAgger); ``None``: the teacher drives."""
+    noise: float = 0.0
+    """Probability that the driver's action at a step with a choice is replaced by a random
+    legal one (drawn from a generator seeded by ``seed``); labels are unaffected."""
 
 
 def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: int):
@@ -73,6 +80,7 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     env = VertiportEnv(config=from_dict(task.env_config))
     teacher = make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed)
     learner = GCNController(task.learner) if task.learner is not None else None
+    noise_rng = np.random.default_rng([task.seed, 1])
     obs, _ = env.reset(seed=task.seed)
     if hasattr(teacher, "bind"):
         teacher.bind(env.sim)
@@ -98,6 +106,8 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         else:
             label = int(np.argmax(mask))
         action = learner.act(obs) if learner is not None and choice else label
+        if choice and task.noise > 0.0 and noise_rng.random() < task.noise:
+            action = int(noise_rng.choice(np.flatnonzero(mask)))
         obs, _, _, truncated, _ = env.step(action)
         if truncated:
             break
@@ -187,6 +197,11 @@ def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, 
     return stats
 
 
+def _with_battery(env_config: dict[str, Any], pct: float) -> dict[str, Any]:
+    """``env_config`` with every battery starting at ``pct`` %."""
+    return {**env_config, "battery": {**env_config.get("battery", {}), "initial_pct": float(pct)}}
+
+
 def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
     """The actor's weights as checkpoint content a worker can load (see GCNController)."""
     from marl_vertiport.config import to_dict
@@ -195,8 +210,14 @@ def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
             "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
 
 
-def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None] = print
-               ) -> dict[str, float]:
+#: Day metrics averaged per warm-start round for the learning curve (``warmstart.csv``).
+ROUND_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
+                 "mean_delay_min", "collisions", "separation_losses", "battery_depletions")
+
+
+def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None] = print,
+               state_path: Path | None = None,
+               on_round: Callable[[dict[str, float]], None] | None = None) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
     docstring); ``cfg`` is the :class:`~agents.gcn.training.TrainConfig`.
 
@@ -204,47 +225,115 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
     (the last one by a round of days of its own, not fit on); the actor keeps the weights of
     the best-scoring fit, as DAgger prescribes (it returns the best of its iterates, not
     necessarily the last). Returns the last fit's statistics, the teacher's mean reward on the
-    days it drives, each fit's score and the fit kept."""
+    days it drives, each fit's score and the fit kept.
+
+    ``state_path``: after every round, everything needed to go on (the decisions collected,
+    the fits, the scores, torch's random state) is written there atomically; a call that finds
+    the file continues after its last round and gives the same result as a run never
+    interrupted. ``on_round(record)`` receives, per round, the mean metrics of its full days
+    (:data:`ROUND_METRICS`), who drove, the demonstration steps so far and the fit's loss."""
     pre = cfg.pretrain
     if pre.days <= 0 or pre.epochs <= 0:
         return {}
-    stats: dict[str, float] = {}
-    data: dict[str, np.ndarray] | None = None
-    fits: list[dict[str, Any]] = []
-    scores: list[float] = []
-    for round_ in range(pre.dagger_rounds + 2):
+    # What the saved progress must have been made with to be continued.
+    made_with = {"pretrain": dataclasses.asdict(pre), "seed": cfg.seed, "env_config": env_config,
+                 "model": dataclasses.asdict(cfg.model)}
+    state: dict[str, Any] = {"next_round": 0, "data": None, "fits": [], "scores": [], "stats": {},
+                             "records": [], "env_steps": 0, "made_with": made_with}
+    if state_path is not None and state_path.exists():
+        state = load_warm_start_state(state_path)
+        if state["made_with"] != made_with:
+            raise ValueError(f"{state_path}: the warm start saved there was made with another "
+                             f"configuration (pretrain, seed, env or model); delete it to redo "
+                             f"the warm start, or resume with the configuration it was made with")
+        log(f"warm start: resuming after round {state['next_round'] - 1} from {state_path.name}")
+        torch.set_rng_state(state["torch_rng"])
+        if state["fits"]:
+            actor.load_state_dict(state["fits"][-1]["actor_state_dict"])
+        for record in state["records"]:
+            if on_round is not None:
+                on_round(record)
+    stats, fits, scores = state["stats"], state["fits"], state["scores"]
+    for round_ in range(state["next_round"], pre.dagger_rounds + 2):
         last = round_ == pre.dagger_rounds + 1  # scores the last fit; nothing is refit
         learner = fits[-1] if fits else None
         # Seeds of their own, below the evaluation seeds and apart from PPO's episodes: full
         # days, then the first minutes of more days (the start of a day, all batteries full and
         # every vehicle placed at random, is where an imitation's early error costs most).
+        # Starts with every battery low (a fleet that cannot all be charged in time) show the
+        # teacher's triage, which its own days rarely reach.
         base = 900_000 + cfg.seed * 1000 + round_ * 100
         lengths = [pre.day_steps] * pre.days + ([] if last else [pre.start_steps] * pre.starts)
-        tasks = [DayTask(env_config, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
-                         pre.rollout_margin, learner) for d, steps in enumerate(lengths)]
+        configs = [env_config] * len(lengths)
+        if not last:
+            levels = [pre.low_battery_pct[i % len(pre.low_battery_pct)]
+                      for i in range(pre.low_battery_starts)]
+            lengths += [pre.start_steps] * len(levels)
+            configs += [_with_battery(env_config, pct) for pct in levels]
+        # Random actions go into the day starts only: the full days score the fits as they are.
+        tasks = [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
+                         pre.rollout_margin, learner, pre.noise if d >= pre.days else 0.0)
+                 for d, (conf, steps) in enumerate(zip(configs, lengths))]
         tag = ("scoring the last fit" if last else "demonstrations" if round_ == 0
                else f"DAgger round {round_}")
         log(f"{tag}: {pre.days} days and {len(lengths) - pre.days} day starts of {pre.start_steps} "
-            f"steps, {'the ' + pre.teacher if learner is None else 'the actor'} drives, the "
+            f"steps ({0 if last else pre.low_battery_starts} with low batteries), "
+            f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
+            f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, the "
             f"{pre.teacher} teacher labels ({pre.workers} workers)")
         new, metrics = collect(tasks, pre.workers, log, tag)
-        days = [m["total_reward"] for m in metrics if m["steps"] == pre.day_steps] or [float("nan")]
+        full = [m for m in metrics if m["steps"] == pre.day_steps]
+        days = [m["total_reward"] for m in full] or [float("nan")]
         if learner is None:
             stats["teacher_reward"] = float(np.mean(days))
         else:
             scores.append(float(np.mean(days)))
             log(f"  fit {len(scores) - 1} scores {scores[-1]:.0f} (mean reward of its days)")
-        if last:
-            break
-        data = new if data is None else {k: np.concatenate([data[k], new[k]]) for k in data}
-        actor_device = next(actor.parameters()).device
-        actor.to("cpu")
-        stats.update(fit_actor(actor, data, pre.epochs, pre.batch_size, pre.learning_rate,
-                               cfg.seed + round_, log, tag, pre.regret_cap))
-        actor.to(actor_device)
-        fits.append(_learner(actor, env_config, cfg))
+        state["env_steps"] += int(sum(m["steps"] for m in metrics))
+        record = {"round": float(round_), "driver": 0.0 if learner is None else 1.0,
+                  "env_steps": float(state["env_steps"]),
+                  **{k: float(np.mean([m[k] for m in full])) if full else float("nan")
+                     for k in ROUND_METRICS}}
+        if not last:
+            state["data"] = new if state["data"] is None else {
+                k: np.concatenate([state["data"][k], new[k]]) for k in state["data"]}
+            actor_device = next(actor.parameters()).device
+            actor.to("cpu")
+            stats.update(fit_actor(actor, state["data"], pre.epochs, pre.batch_size,
+                                   pre.learning_rate, cfg.seed + round_, log, tag, pre.regret_cap))
+            actor.to(actor_device)
+            fits.append(_learner(actor, env_config, cfg))
+            record.update(cross_entropy=stats["cross_entropy"], accuracy=stats["accuracy"])
+        state["records"].append(record)
+        state["next_round"] = round_ + 1
+        if state_path is not None:
+            save_warm_start_state(state_path, state)
+        if on_round is not None:
+            on_round(record)
     best = int(np.nanargmax(scores))
     actor.load_state_dict(fits[best]["actor_state_dict"])
     stats.update({f"fit_{k}_score": v for k, v in enumerate(scores)}, chosen_fit=float(best))
     log(f"warm start: keeping fit {best} of {len(fits)} (score {scores[best]:.0f})")
     return stats
+
+
+def save_warm_start_state(path: Path, state: dict[str, Any]) -> None:
+    """Write the warm start's progress atomically (see :func:`warm_start`)."""
+    buf = io.BytesIO()
+    torch.save({**state, "torch_rng": torch.get_rng_state()}, buf)
+    write_atomic(path, buf.getvalue())
+
+
+def load_warm_start_state(path: Path) -> dict[str, Any]:
+    """Read a warm start's progress; a file that is not one raises ``ValueError`` naming it."""
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # truncated or foreign file
+        raise ValueError(f"{path}: not a readable warm-start state ({type(exc).__name__}: {exc}); "
+                         f"delete it to redo the warm start") from exc
+    missing = {"next_round", "data", "fits", "scores", "stats", "records", "env_steps",
+               "made_with", "torch_rng"} - set(state if isinstance(state, dict) else ())
+    if missing:
+        raise ValueError(f"{path}: not a warm-start state (missing {', '.join(sorted(missing))}); "
+                         f"delete it to redo the warm start")
+    return state

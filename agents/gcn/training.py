@@ -30,7 +30,7 @@ import torch
 import yaml
 
 from agents.files import write_atomic
-from agents.gcn.imitation import TEACHERS, warm_start
+from agents.gcn.imitation import ROUND_METRICS, TEACHERS, warm_start
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.sim.core import (
     CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
@@ -39,6 +39,10 @@ from marl_vertiport.sim.core import (
 
 TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
 CHECKPOINT_FORMAT = 1
+#: Columns of ``warmstart.csv``: one row per warm-start round (``driver`` 0: the teacher drove,
+#: 1: the actor); ``env_steps`` counts demonstration steps so far.
+WARM_CURVE_KEYS = ("round", "driver", "env_steps", *ROUND_METRICS, "cross_entropy", "accuracy")
+WARM_STATE = "warmstart_state.pt"
 CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_loss", "surrogate_loss",
               "entropy", "learning_rate", "total_reward", "mean_battery_pct", "good_takeoffs",
               "good_landings", "mean_delay_min", "collisions", "separation_losses",
@@ -76,6 +80,16 @@ class PretrainConfig:
     learning_rate: float = 1e-3
     dagger_rounds: int = 0
     """Rounds of DAgger after behaviour cloning: the actor drives, the teacher labels."""
+    noise: float = 0.0
+    """Probability that the driver's action at a step with a choice of a day start is replaced
+    by a uniformly drawn legal action (the label stays the teacher's): the data then covers the
+    states just off the driver's path, from which it must recover (noise injection, as in
+    DART). The full days, which also score the fits, run without it."""
+    low_battery_starts: int = 0
+    """Extra day starts per round in which every battery begins low, cycling through
+    ``low_battery_pct``: the teacher shows what to do when a charge cannot be had for all."""
+    low_battery_pct: tuple[float, ...] = (30.0, 45.0, 60.0)
+    """Initial battery levels (%) of those starts."""
 
 
 @dataclass(frozen=True)
@@ -156,6 +170,13 @@ class TrainConfig:
             (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
             (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
             (self.pretrain.regret_cap >= 0, "pretrain.regret_cap", "must be >= 0"),
+            (self.pretrain.days + self.pretrain.starts + self.pretrain.low_battery_starts <= 100,
+             "pretrain", "days + starts + low_battery_starts must be <= 100 (seeds of a round)"),
+            (0.0 <= self.pretrain.noise < 1.0, "pretrain.noise", "must lie in [0, 1)"),
+            (self.pretrain.low_battery_starts >= 0, "pretrain.low_battery_starts", "must be >= 0"),
+            (len(self.pretrain.low_battery_pct) > 0
+             and all(0.0 < b <= 100.0 for b in self.pretrain.low_battery_pct),
+             "pretrain.low_battery_pct", "a non-empty list of levels in (0, 100]"),
             (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
             (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),
         ]
@@ -278,27 +299,35 @@ def read_curves(path: Path) -> list[dict[str, float]]:
         return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
 
 
-def write_curves(path: Path, rows: list[dict[str, float]]) -> None:
+def write_curves(path: Path, rows: list[dict[str, float]], keys: tuple[str, ...] = CURVE_KEYS) -> None:
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(CURVE_KEYS))
+    writer = csv.DictWriter(buf, fieldnames=list(keys))
     writer.writeheader()
     for row in rows:
-        writer.writerow({k: row.get(k, float("nan")) for k in CURVE_KEYS})
+        writer.writerow({k: row.get(k, float("nan")) for k in keys})
     write_atomic(path, buf.getvalue())
 
 
-def plot_curves(rows: list[dict[str, float]], out: Path, title: str) -> None:
+def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
+                warm_rows: list[dict[str, float]] = ()) -> None:
     """The paper's learning-curve figure: reward and loss, battery, take-offs/landings, delay,
-    collisions per episode against environment steps."""
+    collisions per episode against environment steps.
+
+    ``warm_rows`` (``warmstart.csv``): the warm start's rounds come first, at the demonstration
+    steps they took, shaded, with the imitation loss in the loss panel; each point is the mean
+    of the round's full days (the teacher's round as a star). PPO's iterations follow them."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    x = np.array([r["env_steps"] for r in rows]) / 1000.0
+    offset = max((r["env_steps"] for r in warm_rows), default=0.0)
+    x = (np.array([r["env_steps"] for r in rows]) + offset) / 1000.0
+    xw = np.array([r["env_steps"] for r in warm_rows]) / 1000.0
+    by_teacher = np.array([r.get("driver", 1.0) == 0.0 for r in warm_rows], dtype=bool)
     panels = [
         ("Total reward per episode", [("total_reward", "total reward")]),
-        ("PPO losses", [("value_loss", "value loss"), ("surrogate_loss", "surrogate loss")]),
+        ("Losses", [("value_loss", "PPO value loss"), ("surrogate_loss", "PPO surrogate loss")]),
         ("Mean battery (%)", [("mean_battery_pct", "mean battery")]),
         ("Good operations per episode", [("good_takeoffs", "take-offs"), ("good_landings", "landings")]),
         ("Mean delay per eVTOL (min)", [("mean_delay_min", "delay")]),
@@ -308,15 +337,28 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str) -> None:
     ]
     fig, axes = plt.subplots(2, 3, figsize=(14, 7.5))
     for ax, (panel_title, series) in zip(axes.ravel(), panels):
-        for key, label in series:
+        if warm_rows:
+            ax.axvspan(0.0, offset / 1000.0, color="0.9", zorder=0,
+                       label="warm start (imitation)" if panel_title.startswith("Total") else None)
+        if panel_title == "Losses" and warm_rows:
+            series = [("cross_entropy", "imitation cross-entropy"), *series]
+        for n, (key, label) in enumerate(series):
+            color = f"C{n}"
+            yw = np.array([r.get(key, np.nan) for r in warm_rows], dtype=float)
             y = np.array([r.get(key, np.nan) for r in rows], dtype=float)
-            ok = np.isfinite(y)
+            xs = np.concatenate([xw, x])
+            ys = np.concatenate([yw, y])
+            ok = np.isfinite(ys)
             if ok.any():
-                ax.plot(x[ok], y[ok], marker=".", label=label)
+                ax.plot(xs[ok], ys[ok], marker=".", color=color, label=label)
+            teacher = by_teacher & np.isfinite(yw)
+            if teacher.any():
+                ax.plot(xw[teacher], yw[teacher], marker="*", markersize=12, linestyle="none",
+                        color=color, label="teacher's days" if n == 0 else None)
         ax.set_title(panel_title)
         ax.set_xlabel("environment steps (thousands)")
         ax.grid(alpha=0.3)
-        if len(series) > 1:
+        if len(ax.get_legend_handles_labels()[0]) > 1:
             ax.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
@@ -352,17 +394,29 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     runner = runner_cls(vec_env, runner_config(cfg), log_dir=str(run_dir), device=cfg.device)
     runner.checkpoint_infos = checkpoint_infos(cfg, env_cfg)
     curves_path = run_dir / "curves.csv"
+    warm_path = run_dir / "warmstart.csv"
     curves = read_curves(curves_path) if resume else []
-    if resume:
-        ckpt = latest_checkpoint(run_dir)
-        if ckpt is None:
-            raise FileNotFoundError(f"{run_dir}: no checkpoint (model_<iteration>.pt) to resume from")
+    warm_rows = read_curves(warm_path) if resume else []
+    ckpt = latest_checkpoint(run_dir) if resume else None
+    if resume and ckpt is not None:
         load_checkpoint_into(runner, ckpt)
         runner.current_learning_iteration += 1
         curves = [r for r in curves if r["iteration"] < runner.current_learning_iteration]
         log(f"resuming {run_dir} from {ckpt.name} at iteration {runner.current_learning_iteration}")
     else:
-        stats = warm_start(runner.alg.actor, cfg, to_dict(env_cfg), log=log)
+        if resume and not (run_dir / WARM_STATE).exists():
+            raise FileNotFoundError(f"{run_dir}: no checkpoint (model_<iteration>.pt) and no "
+                                    f"warm-start progress ({WARM_STATE}) to resume from")
+        if not resume:
+            (run_dir / WARM_STATE).unlink(missing_ok=True)  # a new run starts its warm start over
+        warm_rows = []
+
+        def on_round(record: dict[str, float]) -> None:
+            warm_rows.append(record)
+            write_curves(warm_path, warm_rows, WARM_CURVE_KEYS)
+
+        stats = warm_start(runner.alg.actor, cfg, to_dict(env_cfg), log=log,
+                           state_path=run_dir / WARM_STATE, on_round=on_round)
         if stats:
             runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
     remaining = cfg.iterations - runner.current_learning_iteration
@@ -419,8 +473,9 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         runner.learn(remaining)
     final = latest_checkpoint(run_dir)
     vec_env.close()
-    if curves:
-        plot_curves(curves, run_dir / "learning_curves.png", f"GCN-PPO ({cfg.mode}, {cfg.env_config})")
+    if curves or warm_rows:
+        plot_curves(curves, run_dir / "learning_curves.png", f"GCN-PPO ({cfg.mode}, {cfg.env_config})",
+                    warm_rows)
     if evaluate and cfg.evaluation.episodes > 0 and final is not None:
         from agents.evaluate import main as evaluate_main
 
