@@ -73,3 +73,14 @@ def test_noise_changes_the_path_not_the_labels_and_low_battery_starts():
         bad = {**base, "pretrain": {**base["pretrain"], key: value}}
         with pytest.raises(ConfigError, match="pretrain"):
             build_dataclass(TrainConfig, bad)
+
+
+def test_collect_gives_the_same_data_on_one_or_two_workers():
+    env_cfg = to_dict(load_config("paper"))
+    tasks = [DayTask(env_cfg, s, steps, "heuristic", 4, noise=0.2)
+             for s, steps in ((11, 90), (12, 20), (13, 50))]
+    one, m1 = collect(tasks, 1, lambda *_: None, "one")
+    two, m2 = collect(tasks, 2, lambda *_: None, "two")
+    assert [m["steps"] for m in m2] == [90, 20, 50] and m1 == m2
+    for key in one:
+        np.testing.assert_array_equal(one[key], two[key])

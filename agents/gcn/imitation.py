@@ -123,7 +123,9 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
 
 def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag: str
             ) -> tuple[dict[str, np.ndarray], list[dict[str, Any]]]:
-    """Run ``tasks`` on ``workers`` spawned processes (1: in this process), logging each day."""
+    """Run ``tasks`` on ``workers`` spawned processes (1: in this process), logging each day;
+    returns their decisions concatenated in task order and each task's metrics, the same for
+    any number of workers."""
     start = time.time()
     results: list[tuple[dict[str, np.ndarray], dict[str, Any]]] = []
 
@@ -137,13 +139,18 @@ def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag:
     if workers <= 1:
         for task in tasks:
             report(label_day(task))
+        ordered = results
     else:
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            for fut in as_completed([pool.submit(label_day, t) for t in tasks]):
+            futures = [pool.submit(label_day, t) for t in tasks]
+            for fut in as_completed(futures):
                 report(fut.result())
-    data = {k: np.concatenate([r[0][k] for r in results]) for k in results[0][0]}
-    return data, [r[1] for r in results]
+            # In task order, not finishing order: the fit's data, and so the run, do not
+            # depend on which worker finished first.
+            ordered = [fut.result() for fut in futures]
+    data = {k: np.concatenate([r[0][k] for r in ordered]) for k in ordered[0][0]}
+    return data, [r[1] for r in ordered]
 
 
 def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
