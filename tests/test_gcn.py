@@ -291,6 +291,7 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
         assert torch.equal(value, cut["actor_state_dict"][key]), key
     rows = read_curves(tmp_path / "cut" / "warmstart.csv")
     assert [r["round"] for r in rows] == [0.0, 1.0, 2.0] and rows[0]["driver"] == 0.0
+    assert rows[-1]["kept_round"] == whole["infos"]["warm_start"]["chosen_fit"] + 1
     np.testing.assert_equal(rows, read_curves(tmp_path / "whole" / "warmstart.csv"))  # NaN == NaN
     # Progress made with another configuration is refused, naming the file.
     other = build_dataclass(TrainConfig, {**to_dict(cfg), "seed": 5})

@@ -238,7 +238,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
     the fits, the scores, torch's random state) is written there atomically; a call that finds
     the file continues after its last round and gives the same result as a run never
     interrupted. ``on_round(record)`` receives, per round, the mean metrics of its full days
-    (:data:`ROUND_METRICS`), who drove, the demonstration steps so far and the fit's loss."""
+    (:data:`ROUND_METRICS`), who drove, the demonstration steps so far and the fit's loss; the
+    last round's record also names the round driven by the fit that is kept (``kept_round``)."""
     pre = cfg.pretrain
     if pre.days <= 0 or pre.epochs <= 0:
         return {}
@@ -301,7 +302,9 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
                   "env_steps": float(state["env_steps"]),
                   **{k: float(np.mean([m[k] for m in full])) if full else float("nan")
                      for k in ROUND_METRICS}}
-        if not last:
+        if last:  # the fit kept for PPO, by the round whose full days it drove
+            record["kept_round"] = float(int(np.nanargmax(scores)) + 1)
+        else:
             state["data"] = new if state["data"] is None else {
                 k: np.concatenate([state["data"][k], new[k]]) for k in state["data"]}
             actor_device = next(actor.parameters()).device

@@ -40,8 +40,10 @@ from marl_vertiport.sim.core import (
 TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
 CHECKPOINT_FORMAT = 1
 #: Columns of ``warmstart.csv``: one row per warm-start round (``driver`` 0: the teacher drove,
-#: 1: the actor); ``env_steps`` counts demonstration steps so far.
-WARM_CURVE_KEYS = ("round", "driver", "env_steps", *ROUND_METRICS, "cross_entropy", "accuracy")
+#: 1: the actor); ``env_steps`` counts demonstration steps so far; the last row's ``kept_round``
+#: is the round whose days the fit kept for PPO drove.
+WARM_CURVE_KEYS = ("round", "driver", "env_steps", *ROUND_METRICS, "cross_entropy", "accuracy",
+                   "kept_round")
 WARM_STATE = "warmstart_state.pt"
 CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_loss", "surrogate_loss",
               "entropy", "learning_rate", "total_reward", "mean_battery_pct", "good_takeoffs",
@@ -313,9 +315,11 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
     """The paper's learning-curve figure: reward and loss, battery, take-offs/landings, delay,
     collisions per episode against environment steps.
 
-    ``warm_rows`` (``warmstart.csv``): the warm start's rounds come first, at the demonstration
-    steps they took, shaded, with the imitation loss in the loss panel; each point is the mean
-    of the round's full days (the teacher's round as a star). PPO's iterations follow them."""
+    ``warm_rows`` (``warmstart.csv``): the warm start's rounds come first, shaded, at the
+    demonstration steps they took; each point is the mean of the round's full days (the
+    teacher's round as a star, the round driven by the fit kept for PPO marked by a dotted line)
+    and the imitation cross-entropy is on the loss panel's right axis. PPO's iterations follow;
+    its days are driven by the sampling policy, not the greedy one the evaluation runs."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -325,6 +329,8 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
     x = (np.array([r["env_steps"] for r in rows]) + offset) / 1000.0
     xw = np.array([r["env_steps"] for r in warm_rows]) / 1000.0
     by_teacher = np.array([r.get("driver", 1.0) == 0.0 for r in warm_rows], dtype=bool)
+    kept = [r["kept_round"] for r in warm_rows if math.isfinite(r.get("kept_round", float("nan")))]
+    kept_x = [xw[i] for i, r in enumerate(warm_rows) if kept and r["round"] == kept[-1]]
     panels = [
         ("Total reward per episode", [("total_reward", "total reward")]),
         ("Losses", [("value_loss", "PPO value loss"), ("surrogate_loss", "PPO surrogate loss")]),
@@ -337,17 +343,25 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
     ]
     fig, axes = plt.subplots(2, 3, figsize=(14, 7.5))
     for ax, (panel_title, series) in zip(axes.ravel(), panels):
+        first = panel_title.startswith("Total")
         if warm_rows:
             ax.axvspan(0.0, offset / 1000.0, color="0.9", zorder=0,
-                       label="warm start (imitation)" if panel_title.startswith("Total") else None)
-        if panel_title == "Losses" and warm_rows:
-            series = [("cross_entropy", "imitation cross-entropy"), *series]
+                       label="warm start (imitation)" if first else None)
+        if kept_x:
+            ax.axvline(kept_x[0], color="0.4", linestyle=":",
+                       label="days of the fit kept for PPO" if first else None)
+        losses = panel_title == "Losses"
         for n, (key, label) in enumerate(series):
             color = f"C{n}"
+            if losses:  # PPO's losses only; the imitation loss goes on the right axis
+                y = np.array([r.get(key, np.nan) for r in rows], dtype=float)
+                ok = np.isfinite(y)
+                if ok.any():
+                    ax.plot(x[ok], y[ok], marker=".", color=color, label=label)
+                continue
             yw = np.array([r.get(key, np.nan) for r in warm_rows], dtype=float)
             y = np.array([r.get(key, np.nan) for r in rows], dtype=float)
-            xs = np.concatenate([xw, x])
-            ys = np.concatenate([yw, y])
+            xs, ys = np.concatenate([xw, x]), np.concatenate([yw, y])
             ok = np.isfinite(ys)
             if ok.any():
                 ax.plot(xs[ok], ys[ok], marker=".", color=color, label=label)
@@ -355,10 +369,22 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
             if teacher.any():
                 ax.plot(xw[teacher], yw[teacher], marker="*", markersize=12, linestyle="none",
                         color=color, label="teacher's days" if n == 0 else None)
+        if losses and warm_rows:
+            ce = np.array([r.get("cross_entropy", np.nan) for r in warm_rows], dtype=float)
+            ok = np.isfinite(ce)
+            if ok.any():
+                right = ax.twinx()
+                right.plot(xw[ok], ce[ok], marker="s", color="C3", label="imitation cross-entropy")
+                right.set_ylabel("imitation cross-entropy", color="C3")
+                right.tick_params(axis="y", colors="C3")
+                right.set_ylim(bottom=0.0)
+                handles, labels = ax.get_legend_handles_labels()
+                more = right.get_legend_handles_labels()
+                right.legend(handles + more[0], labels + more[1], fontsize=8, loc="center right")
         ax.set_title(panel_title)
         ax.set_xlabel("environment steps (thousands)")
         ax.grid(alpha=0.3)
-        if len(ax.get_legend_handles_labels()[0]) > 1:
+        if len(ax.get_legend_handles_labels()[0]) > 1 and not (losses and warm_rows):
             ax.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
