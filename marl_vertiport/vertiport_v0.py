@@ -47,6 +47,7 @@ import numpy as np
 from gymnasium.utils import seeding
 from pettingzoo import AECEnv
 from pettingzoo.utils import wrappers
+from pettingzoo.utils.env_logger import EnvLogger
 
 from marl_vertiport.config import EnvConfig, load_config
 from marl_vertiport.render import draw_scenery, render_frame
@@ -54,13 +55,26 @@ from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import display_available
 from marl_vertiport.spaces import ObservationBuilder
 
-__all__ = ["env", "raw_env"]
+__all__ = ["OrderEnforcing", "env", "raw_env"]
 
 
 def env(config: str | EnvConfig | dict | None = None, render_mode: str | None = None,
         **overrides: Any) -> AECEnv:
     """The AEC env with PettingZoo's order-enforcing wrapper."""
-    return wrappers.OrderEnforcingWrapper(raw_env(config=config, render_mode=render_mode, **overrides))
+    return OrderEnforcing(raw_env(config=config, render_mode=render_mode, **overrides))
+
+
+class OrderEnforcing(wrappers.OrderEnforcingWrapper):
+    """PettingZoo's order-enforcing wrapper with ``last()`` answered by the raw env in one call.
+
+    The inherited ``last()`` reads the agent, its reward, flags and info through the wrapper's
+    ``__getattr__`` (two hops per attribute, about 8 a step); the raw env returns the same
+    values. Calling it before ``reset`` is refused as ``observe`` is."""
+
+    def last(self, observe: bool = True) -> tuple:
+        if not self._has_reset:
+            EnvLogger.error_observe_before_reset()
+        return self.env.last(observe)
 
 
 class raw_env(AECEnv):

@@ -4,6 +4,7 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from pettingzoo import AECEnv
 from pettingzoo.test import api_test, render_test, seed_test
 
 import marl_vertiport  # noqa: F401  (registers the Gymnasium id)
@@ -96,3 +97,21 @@ def test_single_agent_sample_is_legal_and_copies_are_plain():
         obs, *_ = env.step(action)
     assert type(copy.deepcopy(env.action_space)) is gymnasium.spaces.Discrete
     assert pickle.loads(pickle.dumps(env.action_space)) == gymnasium.spaces.Discrete(14)
+
+
+def test_last_through_the_wrapper_is_the_raw_envs_last():
+    from pettingzoo.utils import wrappers
+
+    env = vertiport_v0.env(config="paper_uncertain")
+    assert isinstance(env, wrappers.OrderEnforcingWrapper)
+    with pytest.raises(AssertionError, match="reset"):
+        env.last()
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        got, want = env.last(), AECEnv.last(env)  # the inherited last(), through __getattr__
+        np.testing.assert_equal(got, want)
+        assert env.last(observe=False)[0] is None
+        legal = np.flatnonzero(got[0]["action_mask"])
+        env.step(int(rng.choice(legal)))
+    env.close()
