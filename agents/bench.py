@@ -451,8 +451,9 @@ def report(results: dict[str, Any]) -> str:
         "- Our own cost is spread over many small calls (see the profile): the simulator's step "
         "(scalar per-vehicle bookkeeping), the observation (eVTOL features built from Python rows, "
         "one conversion to float32, copies of the port graph, edges and mask) and, in the AEC API, "
-        "PettingZoo's order-enforcing wrapper (each attribute read goes through two "
-        "`__getattr__`), `last()` and the agent iterator.",
+        "the agent iterator of PettingZoo's order-enforcing wrapper (it reads the env through two "
+        "`__getattr__` hops per attribute; the env's own `last()` skips them) and the reward "
+        "and info dicts.",
         "- The single-agent API skips the AEC wrappers and reward dicts; the larger fleet costs "
         "less than proportionally more per step (per-vehicle work is a small part of a step).",
         "- Vector envs in one process pay per-copy Python and the stacking of observations; "
