@@ -27,6 +27,7 @@ def test_pettingzoo_render():
 
 
 @pytest.mark.filterwarnings("ignore:.*Box observation space m.*:UserWarning")
+@pytest.mark.filterwarnings("ignore:render_mode='human' needs a display:UserWarning")
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 def test_gymnasium_check_env(config):
     env = gymnasium.make("marl_vertiport/Vertiport-v0", config=config).unwrapped
