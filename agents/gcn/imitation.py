@@ -288,7 +288,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
             f"steps ({0 if last else pre.low_battery_starts} with low batteries), "
             f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, the "
-            f"{pre.teacher} teacher labels ({pre.workers} workers)")
+            f"{pre.teacher} teacher labels ({pre.workers} worker{'s' if pre.workers != 1 else ''})")
         new, metrics = collect(tasks, pre.workers, log, tag)
         full = [m for m in metrics if m["steps"] == pre.day_steps]
         days = [m["total_reward"] for m in full] or [float("nan")]
