@@ -47,7 +47,6 @@ import numpy as np
 from gymnasium.utils import seeding
 from pettingzoo import AECEnv
 from pettingzoo.utils import wrappers
-from pettingzoo.utils.env_logger import EnvLogger
 
 from marl_vertiport.config import EnvConfig, load_config
 from marl_vertiport.render import draw_scenery, render_frame
@@ -69,12 +68,15 @@ class OrderEnforcing(wrappers.OrderEnforcingWrapper):
 
     The inherited ``last()`` reads the agent, its reward, flags and info through the wrapper's
     ``__getattr__`` (two hops per attribute, about 8 a step); the raw env returns the same
-    values. Calling it before ``reset`` is refused as ``observe`` is."""
+    values, and before ``reset`` it raises the inherited one's ``AttributeError``."""
 
     def last(self, observe: bool = True) -> tuple:
         if not self._has_reset:
-            EnvLogger.error_observe_before_reset()
+            raise AttributeError("agent_selection cannot be accessed before reset")
         return self.env.last(observe)
+
+    def __str__(self) -> str:
+        return str(self.env)
 
 
 class raw_env(AECEnv):

@@ -80,3 +80,17 @@ def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeyp
     monkeypatch.setattr(bench, "_env_loop", loop)
     result = bench._env_run("aec", "paper", 100, seed=0)
     assert len(runs) == 2 and result["engine_alone_s_per_step"] > 0
+
+
+def test_floor_paragraph_names_the_binding_api_and_the_room_left():
+    from agents.bench import _floor_lines
+
+    env_rows = [{"api": "aec", "config": "paper", "engine_us_per_step": 4.0, "engine_us_per_moving_step": 50.0},
+                {"api": "single_agent", "config": "paper", "engine_us_per_step": 5.0,
+                 "engine_us_per_moving_step": 50.0}]
+    floor = {"api_floor": [{"api": "aec", "us_per_step": 10.0}, {"api": "single_agent", "us_per_step": 4.0}]}
+    (line,) = _floor_lines(floor, env_rows)
+    assert "2.50 times" in line and "cannot come down to 1.0" in line  # AEC: floor above the engine
+    assert "0.80 times" in line and "leaves 1.0 µs" in line  # single-agent: room left
+    assert "at most 0.20 times" in line
+    assert _floor_lines({}, env_rows) == []  # results of an older benchmark: no paragraph

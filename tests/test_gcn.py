@@ -298,6 +298,8 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="another configuration"):
         imitation.warm_start(None, other, to_dict(load_config("paper")), log=lambda *_: None,
                              state_path=tmp_path / "cut" / WARM_STATE)
+    with pytest.raises(FileNotFoundError, match="no checkpoint"):
+        train(cfg, tmp_path / "empty", resume=True, log=lambda *_: None, evaluate=False)
     (tmp_path / "cut" / WARM_STATE).write_bytes(b"junk")
     with pytest.raises(ValueError, match="not a readable warm-start state"):
         imitation.load_warm_start_state(tmp_path / "cut" / WARM_STATE)

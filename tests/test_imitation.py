@@ -53,15 +53,29 @@ def test_fit_then_learner_drives_a_dagger_day():
         make_teacher("oracle", 4, 0.0, 0)
 
 
-def test_noise_changes_the_path_not_the_labels_and_low_battery_starts():
+def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatch):
+    import agents.gcn.imitation as imitation
+
     env_cfg = to_dict(load_config("paper"))
     clean, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4))
+    chosen: list[int] = []
+    original = imitation.make_teacher
+
+    def recording_teacher(*args):
+        teacher = original(*args)
+        act = teacher.act
+        teacher.act = lambda obs: chosen.append(int(act(obs))) or chosen[-1]
+        return teacher
+
+    monkeypatch.setattr(imitation, "make_teacher", recording_teacher)
     noisy, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4, noise=0.5))
+    monkeypatch.setattr(imitation, "make_teacher", original)
     again, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4, noise=0.5))
     # Random actions take the day elsewhere; the same seed draws the same ones.
     assert not np.array_equal(clean["evtol_nodes"][:20], noisy["evtol_nodes"][:20])
     np.testing.assert_array_equal(noisy["label"], again["label"])
-    assert noisy["action_mask"][np.arange(len(noisy["label"])), noisy["label"]].all()
+    # Every label is the teacher's own choice in that state, whatever was then executed.
+    assert noisy["label"].tolist() == chosen
     low = _with_battery(env_cfg, 45.0)
     assert env_cfg["battery"]["initial_pct"] == 100.0 and low["battery"]["initial_pct"] == 45.0
     env = raw_env(config=load_config(low))
@@ -84,3 +98,20 @@ def test_collect_gives_the_same_data_on_one_or_two_workers():
     assert [m["steps"] for m in m2] == [90, 20, 50] and m1 == m2
     for key in one:
         np.testing.assert_array_equal(one[key], two[key])
+
+
+def test_round_tasks_mix_seeds_noise_and_low_batteries():
+    from agents.gcn.imitation import round_tasks
+
+    cfg = TrainConfig(pretrain=build_dataclass(type(TrainConfig().pretrain), {
+        "days": 2, "starts": 3, "low_battery_starts": 5, "low_battery_pct": [10, 30],
+        "noise": 0.1, "day_steps": 1440, "start_steps": 120}))
+    env_cfg = to_dict(load_config("paper"))
+    first = round_tasks(cfg, env_cfg, 0, None, last=False)
+    assert [t.steps for t in first] == [1440] * 2 + [120] * 8
+    assert [t.noise for t in first] == [0.0] * 2 + [0.1] * 8  # full days score the fits: no noise
+    assert [t.env_config["battery"]["initial_pct"] for t in first] == [100.0] * 5 + [10, 30, 10, 30, 10]
+    scoring = round_tasks(cfg, env_cfg, 3, {"weights": 1}, last=True)
+    assert [t.steps for t in scoring] == [1440] * 2 and all(t.learner for t in scoring)
+    seeds = [t.seed for r in range(4) for t in round_tasks(cfg, env_cfg, r, None, last=False)]
+    assert len(set(seeds)) == len(seeds) and max(seeds) < 1_000_000  # new per round, not eval seeds

@@ -11,8 +11,10 @@ Teachers (``pretrain.teacher``):
 
 Days of demonstrations run in worker processes, one day per task, through the Gymnasium env:
 the acting eVTOL's observation there is exactly what that eVTOL observes as an AEC agent, so
-the same data trains the actor of both training modes. Each round runs ``days`` full days and
-``starts`` shorter episodes of a day's first ``start_steps`` steps. Only steps with a choice
+the same data trains the actor of both training modes. Each round runs ``days`` full days,
+``starts`` shorter episodes of a day's first ``start_steps`` steps and ``low_battery_starts``
+such episodes with every battery starting low; in the day starts a share ``noise`` of the
+driver's actions is replaced by random legal ones (see :func:`round_tasks`). Only steps with a choice
 (two or more legal actions) are kept: the others teach nothing. In round 0 the teacher drives;
 in each DAgger round the current actor drives (greedily) and the teacher labels the states the
 actor visits, and the actor is refit on everything collected so far.
@@ -217,6 +219,32 @@ def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
             "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
 
 
+def round_tasks(cfg, env_config: dict[str, Any], round_: int, learner: dict[str, Any] | None,
+                last: bool) -> list[DayTask]:
+    """The episodes of warm-start round ``round_`` (``last``: the round that only scores the
+    last fit, full days alone).
+
+    Seeds of their own, below the evaluation seeds and apart from PPO's episodes, new in every
+    round: ``pretrain.days`` full days, then ``starts`` day starts (the start of a day, all
+    batteries full and every vehicle placed at random, is where an imitation's early error
+    costs most), then ``low_battery_starts`` day starts with every battery at the levels of
+    ``low_battery_pct`` in turn (a fleet that cannot all be charged in time shows the teacher's
+    triage, which its own days rarely reach). Random actions (``noise``) go into the day starts
+    only: the full days score the fits as they are."""
+    pre = cfg.pretrain
+    base = 900_000 + cfg.seed * 1000 + round_ * 100
+    lengths = [pre.day_steps] * pre.days + ([] if last else [pre.start_steps] * pre.starts)
+    configs = [env_config] * len(lengths)
+    if not last:
+        levels = [pre.low_battery_pct[i % len(pre.low_battery_pct)]
+                  for i in range(pre.low_battery_starts)]
+        lengths += [pre.start_steps] * len(levels)
+        configs += [_with_battery(env_config, pct) for pct in levels]
+    return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
+                    pre.rollout_margin, learner, pre.noise if d >= pre.days else 0.0)
+            for d, (conf, steps) in enumerate(zip(configs, lengths))]
+
+
 #: Day metrics averaged per warm-start round for the learning curve (``warmstart.csv``).
 ROUND_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
                  "mean_delay_min", "collisions", "separation_losses", "battery_depletions")
@@ -244,8 +272,9 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
     if pre.days <= 0 or pre.epochs <= 0:
         return {}
     # What the saved progress must have been made with to be continued.
-    made_with = {"pretrain": dataclasses.asdict(pre), "seed": cfg.seed, "env_config": env_config,
-                 "model": dataclasses.asdict(cfg.model)}
+    # (Not the worker count: the data does not depend on it.)
+    made_with = {"pretrain": {k: v for k, v in dataclasses.asdict(pre).items() if k != "workers"},
+                 "seed": cfg.seed, "env_config": env_config, "model": dataclasses.asdict(cfg.model)}
     state: dict[str, Any] = {"next_round": 0, "data": None, "fits": [], "scores": [], "stats": {},
                              "records": [], "env_steps": 0, "made_with": made_with}
     if state_path is not None and state_path.exists():
@@ -265,26 +294,10 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
     for round_ in range(state["next_round"], pre.dagger_rounds + 2):
         last = round_ == pre.dagger_rounds + 1  # scores the last fit; nothing is refit
         learner = fits[-1] if fits else None
-        # Seeds of their own, below the evaluation seeds and apart from PPO's episodes: full
-        # days, then the first minutes of more days (the start of a day, all batteries full and
-        # every vehicle placed at random, is where an imitation's early error costs most).
-        # Starts with every battery low (a fleet that cannot all be charged in time) show the
-        # teacher's triage, which its own days rarely reach.
-        base = 900_000 + cfg.seed * 1000 + round_ * 100
-        lengths = [pre.day_steps] * pre.days + ([] if last else [pre.start_steps] * pre.starts)
-        configs = [env_config] * len(lengths)
-        if not last:
-            levels = [pre.low_battery_pct[i % len(pre.low_battery_pct)]
-                      for i in range(pre.low_battery_starts)]
-            lengths += [pre.start_steps] * len(levels)
-            configs += [_with_battery(env_config, pct) for pct in levels]
-        # Random actions go into the day starts only: the full days score the fits as they are.
-        tasks = [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
-                         pre.rollout_margin, learner, pre.noise if d >= pre.days else 0.0)
-                 for d, (conf, steps) in enumerate(zip(configs, lengths))]
+        tasks = round_tasks(cfg, env_config, round_, learner, last)
         tag = ("scoring the last fit" if last else "demonstrations" if round_ == 0
                else f"DAgger round {round_}")
-        log(f"{tag}: {pre.days} days and {len(lengths) - pre.days} day starts of {pre.start_steps} "
+        log(f"{tag}: {pre.days} days and {len(tasks) - pre.days} day starts of {pre.start_steps} "
             f"steps ({0 if last else pre.low_battery_starts} with low batteries), "
             f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, the "

@@ -2,8 +2,10 @@
 
 ``python -m agents.train --config default`` (``make train``). A run lives in its own folder
 (``runs/train/<name>/``): the resolved configs, TensorBoard logs, checkpoints ``model_<it>.pt``
-(written atomically), ``curves.csv``, ``learning_curves.png`` and the final evaluation.
-``--resume <run folder>`` continues an interrupted run from its last checkpoint.
+(written atomically), ``curves.csv``, the warm start's ``warmstart.csv`` and progress
+``warmstart_state.pt``, ``learning_curves.png`` and the final evaluation. ``--resume <run
+folder>`` continues an interrupted run from its last checkpoint, or, when it was stopped during
+the warm start, after the warm start's last finished round.
 
 rsl_rl does the rollouts, PPO updates, logging and checkpoint content; this module only
 configures it, optionally warm-starts the actor by imitation of a teacher (the look-ahead
@@ -90,7 +92,7 @@ class PretrainConfig:
     low_battery_starts: int = 0
     """Extra day starts per round in which every battery begins low, cycling through
     ``low_battery_pct``: the teacher shows what to do when a charge cannot be had for all."""
-    low_battery_pct: tuple[float, ...] = (30.0, 45.0, 60.0)
+    low_battery_pct: tuple[float, ...] = (10.0, 20.0, 30.0, 45.0)
     """Initial battery levels (%) of those starts."""
 
 
@@ -430,19 +432,23 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         curves = [r for r in curves if r["iteration"] < runner.current_learning_iteration]
         log(f"resuming {run_dir} from {ckpt.name} at iteration {runner.current_learning_iteration}")
     else:
-        if resume and not (run_dir / WARM_STATE).exists():
+        # Under torchrun each rank warm-starts on its own seeds; rank 0 writes the curves.
+        rank = int(os.environ.get("RANK", "0"))
+        state_path = run_dir / (WARM_STATE if rank == 0 else f"warmstart_state_rank{rank}.pt")
+        if resume and not state_path.exists():
             raise FileNotFoundError(f"{run_dir}: no checkpoint (model_<iteration>.pt) and no "
-                                    f"warm-start progress ({WARM_STATE}) to resume from")
+                                    f"warm-start progress ({state_path.name}) to resume from")
         if not resume:
-            (run_dir / WARM_STATE).unlink(missing_ok=True)  # a new run starts its warm start over
-        warm_rows = []
+            state_path.unlink(missing_ok=True)  # a new run starts its warm start over
+        warm_rows, curves = [], []  # PPO starts from iteration 0: rows of a stopped one go
 
         def on_round(record: dict[str, float]) -> None:
             warm_rows.append(record)
-            write_curves(warm_path, warm_rows, WARM_CURVE_KEYS)
+            if rank == 0:
+                write_curves(warm_path, warm_rows, WARM_CURVE_KEYS)
 
         stats = warm_start(runner.alg.actor, cfg, to_dict(env_cfg), log=log,
-                           state_path=run_dir / WARM_STATE, on_round=on_round)
+                           state_path=state_path, on_round=on_round)
         if stats:
             runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
     remaining = cfg.iterations - runner.current_learning_iteration
