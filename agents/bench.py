@@ -226,14 +226,15 @@ def bench_env(steps: int, repeats: int, configs: list[str]) -> list[dict[str, An
 
 
 def _api_floor_loop(api: str, steps: int, actions: int = 14, agents: int = 4) -> float:
-    """Seconds per step of the benchmark's loop over an env that does nothing: a PettingZoo AEC
-    env behind the same order-enforcing wrapper as ours, or a plain Gymnasium env, each
-    returning a fixed observation with an all-legal mask. No env built on these APIs and driven
-    by this loop can cost less per step."""
+    """Seconds per step of the benchmark loop's API calls and random choice of a legal action
+    (without its per-step timers) over an env that does nothing: a PettingZoo AEC env behind
+    the same order-enforcing wrapper as ours, or a plain Gymnasium env, each returning a fixed
+    observation with an all-legal mask. No env built on these APIs and driven by this loop can
+    cost less per step."""
     import gymnasium
     from pettingzoo import AECEnv
 
-    from marl_vertiport.vertiport_v0 import OrderEnforcing
+    from marl_vertiport.vertiport_v0 import OrderEnforcing, reset_agent_dicts
 
     obs = {"action_mask": np.ones(actions, dtype=np.int8)}
     rng = np.random.default_rng(0)
@@ -246,12 +247,7 @@ def _api_floor_loop(api: str, steps: int, actions: int = 14, agents: int = 4) ->
             self.possible_agents = [f"a{i}" for i in range(agents)]
 
         def reset(self, seed=None, options=None) -> None:
-            self.agents = self.possible_agents[:]
-            self.rewards = dict.fromkeys(self.agents, 0.0)
-            self._cumulative_rewards = dict.fromkeys(self.agents, 0.0)
-            self.terminations = dict.fromkeys(self.agents, False)
-            self.truncations = dict.fromkeys(self.agents, False)
-            self.infos = {a: {} for a in self.agents}
+            reset_agent_dicts(self)
             self.turn = 0
             self.agent_selection = self.agents[0]
 
@@ -446,8 +442,9 @@ def _floor_lines(results: dict[str, Any], env_rows: list[dict[str, Any]]) -> lis
     moving = max(floor.get(r["api"], 0.0) / r["engine_us_per_moving_step"]
                  for r in env_rows if r["config"] == "paper")
     return [
-        "- The floor under that ratio: the same benchmark loop (with its random choice of a "
-        "legal action) over an env that does nothing, which returns a fixed observation with "
+        "- The floor under that ratio: the benchmark loop's API calls and random choice of a "
+        "legal action (without its per-step timers) over an env that does nothing, which "
+        "returns a fixed observation with "
         "every action legal, the AEC one behind the same order-enforcing wrapper, costs "
         + "; and ".join(parts) + f". In steps with motion the floor is at most {moving:.2f} "
         "times the engine's cost; the rest of the ratio there is the simulator's own Python, "

@@ -54,7 +54,7 @@ from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import display_available
 from marl_vertiport.spaces import ObservationBuilder
 
-__all__ = ["OrderEnforcing", "env", "raw_env"]
+__all__ = ["OrderEnforcing", "env", "raw_env", "reset_agent_dicts"]
 
 
 def env(config: str | EnvConfig | dict | None = None, render_mode: str | None = None,
@@ -77,6 +77,17 @@ class OrderEnforcing(wrappers.OrderEnforcingWrapper):
 
     def __str__(self) -> str:
         return str(self.env)
+
+
+def reset_agent_dicts(aec: AECEnv) -> None:
+    """An AEC env's per-agent bookkeeping at the start of an episode: every possible agent
+    present, rewards 0, no termination or truncation, empty infos."""
+    aec.agents = aec.possible_agents[:]
+    aec.rewards = dict.fromkeys(aec.agents, 0.0)
+    aec._cumulative_rewards = dict.fromkeys(aec.agents, 0.0)
+    aec.terminations = dict.fromkeys(aec.agents, False)
+    aec.truncations = dict.fromkeys(aec.agents, False)
+    aec.infos = {a: {} for a in aec.agents}
 
 
 class raw_env(AECEnv):
@@ -119,12 +130,7 @@ class raw_env(AECEnv):
         if seed is not None or self._rng is None:
             self._rng, _ = seeding.np_random(seed)
         self.sim.reset(self._rng)
-        self.agents = self.possible_agents[:]
-        self.rewards = dict.fromkeys(self.agents, 0.0)
-        self._cumulative_rewards = dict.fromkeys(self.agents, 0.0)
-        self.terminations = dict.fromkeys(self.agents, False)
-        self.truncations = dict.fromkeys(self.agents, False)
-        self.infos = {a: {} for a in self.agents}
+        reset_agent_dicts(self)
         self.agent_selection = self.possible_agents[self.sim.acting]
         self._last_rewarded: str | None = None
 
