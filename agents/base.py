@@ -115,6 +115,12 @@ class Observation:
         """Indices of the free nodes of one type (NORMAL_PORT, CHARGING_PORT, HOVER_SPOT)."""
         return np.flatnonzero((self.ports("available") == 1) & (self.ports("type") == node_type))
 
+    def reachable_nodes(self, node_type: int) -> np.ndarray:
+        """Indices of the nodes of one type that the acting eVTOL may move to now: free, and
+        within its battery when the env checks energy (``atc.energy_check``)."""
+        moves = self.mask[2:2 + self.n_nodes] == 1
+        return np.flatnonzero(moves & (self.ports("type") == node_type))
+
     def node_type(self, node: int) -> int:
         return int(self.ports("type")[int(node)])
 

@@ -6,7 +6,10 @@ time has come and it has at least 60 % of charge; until then it charges, moving 
 port when that is free. Only the vehicle at the head of a queue is served; every other vehicle
 is skipped (it stays where it is), so a waiting vehicle sits on a normal port or a hover spot.
 A landing goes to the charging port when it is free, else to a normal port. Vehicles in flight
-continue; FCFS never uses the avoid action.
+continue; FCFS never uses the avoid action. It keeps to the action mask: a vehicle whose
+take-off the env's energy check (``atc.energy_check``) does not clear withdraws its request, so
+it cannot hold up the queue, and charges until the take-off is cleared; a move the check does
+not clear is not taken.
 
 (Reading the 60 % rule as part of the request keeps the queue from deadlocking: a head that
 waits for the charger while a vehicle that is not the head sits on it would block forever.)
@@ -36,6 +39,8 @@ class FCFSController(Controller):
     def reset(self, seed: int | None = None) -> None:
         self.landing_queue: list[int] = []
         self.takeoff_queue: list[int] = []
+        #: Vehicles whose take-off was not cleared at their last turn: no request from them.
+        self.not_cleared: set[int] = set()
 
     def _update_queues(self, obs: Observation) -> None:
         status = obs.fleet("status").astype(int)
@@ -43,9 +48,10 @@ class FCFSController(Controller):
         on_ground = ((status == ON_PORT) | (status == ON_CHARGER))
         wants_takeoff = (on_ground & (obs.fleet("minutes_to_schedule") <= 0)
                          & (obs.fleet("battery_pct") >= self.takeoff_min_battery_pct))
-        # Served or gone: drop; new requests join at the back (ties in index order).
+        wants_takeoff[list(self.not_cleared)] = False
+        # Served, gone or withdrawn: drop; new requests join at the back (ties in index order).
         self.landing_queue = [v for v in self.landing_queue if wants_landing[v]]
-        self.takeoff_queue = [v for v in self.takeoff_queue if on_ground[v]]
+        self.takeoff_queue = [v for v in self.takeoff_queue if on_ground[v] and v not in self.not_cleared]
         for v in np.flatnonzero(wants_landing).tolist():
             if v not in self.landing_queue:
                 self.landing_queue.append(v)
@@ -55,21 +61,26 @@ class FCFSController(Controller):
 
     def act(self, observation: dict) -> int:
         obs = Observation(observation)
-        self._update_queues(obs)
         me, status, mask = obs.me, obs.status, obs.mask
+        if status in (ON_PORT, ON_CHARGER) and not mask[obs.takeoff]:
+            self.not_cleared.add(me)
+        else:
+            self.not_cleared.discard(me)
+        self._update_queues(obs)
         if status == HOVERING:
             if self.landing_queue[:1] != [me]:
                 return obs.stay
             for node_type in (CHARGING_PORT, NORMAL_PORT):
-                free = obs.free_nodes(node_type)
+                free = obs.reachable_nodes(node_type)
                 if free.size:
                     return obs.go_to(free[0])
             return obs.stay
         if status in (ON_PORT, ON_CHARGER):
             if self.takeoff_queue[:1] == [me]:
                 return obs.takeoff
-            if me not in self.takeoff_queue and obs.mine("battery_pct") < self.takeoff_min_battery_pct:
-                chargers = obs.free_nodes(CHARGING_PORT)
+            short = obs.mine("battery_pct") < self.takeoff_min_battery_pct or me in self.not_cleared
+            if me not in self.takeoff_queue and short:
+                chargers = obs.reachable_nodes(CHARGING_PORT)
                 if status == ON_PORT and chargers.size:
                     return obs.go_to(chargers[0])
             return obs.stay

@@ -127,9 +127,8 @@ class RolloutPlanner(Controller):
 
     @staticmethod
     def stranded(sim: VertiportSim) -> int:
-        """Vehicles out of service (depleted in the air) or with an empty battery on the ground."""
-        empty = (sim.battery <= 0.0) & (sim.status != ON_CHARGER)
-        return int(np.count_nonzero((sim.status == OUT_OF_SERVICE) | empty))
+        """Vehicles lost so far: depleted in the air or stranded on the ground (``sim.lost``)."""
+        return int(np.count_nonzero(sim.lost))
 
     def terminal_value(self, sim: VertiportSim) -> float:
         """What the rest of the day is worth beyond the horizon, estimated as each vehicle's

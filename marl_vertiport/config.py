@@ -163,6 +163,11 @@ class ATCConfig:
     skip_agents_without_decision: bool = False
     """False (paper): the turn of a vehicle outside the airspace is spent waiting for it.
     True: the turn passes to the next vehicle in round-robin order that has a decision."""
+    energy_check: bool = True
+    """True: the action mask clears a take-off or a move to a node only if the battery, less
+    ``energy_reserve_pct``, covers the whole flight (without gusts). False (paper): no check."""
+    energy_reserve_pct: float = 5.0
+    """Battery an energy-checked flight must have left over (covers gusts), percent."""
 
 
 @dataclass(frozen=True)
@@ -271,6 +276,8 @@ def _validate(cfg: EnvConfig) -> None:
     lo, hi = un.gust_speed_loss_range
     _check(0 <= lo <= hi, "uncertainty.gust_speed_loss_range", f"needs 0 <= low <= high, got {[lo, hi]}")
     _check(un.position_noise_std_m >= 0, "uncertainty.position_noise_std_m", "must be >= 0")
+    reserve = cfg.atc.energy_reserve_pct
+    _check(0 <= reserve <= 100, "atc.energy_reserve_pct", f"must lie in [0, 100], got {reserve}")
 
 
 # --------------------------------------------------------------------------------------

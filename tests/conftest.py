@@ -19,12 +19,13 @@ def busy_action(obs: dict, rng: np.random.Generator) -> int:
     status, battery = int(own[0]), own[1]
     minutes_to_schedule = own[SELF_FEATURES.index("minutes_to_schedule")]
     node_actions = 2 + np.arange(len(ports))
-    free_chargers = node_actions[(ports[:, 0] == 1) & (ports[:, 1] == CHARGING_PORT)]
-    free_ports = node_actions[(ports[:, 0] == 1) & (ports[:, 1] != HOVER_SPOT)]
+    movable = mask[node_actions] == 1  # free, and within the battery under the energy check
+    free_chargers = node_actions[movable & (ports[:, 1] == CHARGING_PORT)]
+    free_ports = node_actions[movable & (ports[:, 1] != HOVER_SPOT)]
     if rng.random() < 0.02:
         return int(rng.choice(legal))
     if status in (ON_PORT, ON_CHARGER):
-        if battery > 60 and minutes_to_schedule <= 3:
+        if battery > 60 and minutes_to_schedule <= 3 and mask[TAKEOFF]:
             return TAKEOFF
         if status == ON_PORT and battery < 90 and free_chargers.size:
             return int(free_chargers[0])

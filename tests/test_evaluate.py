@@ -32,7 +32,7 @@ AGENTS = ["random", "tests.test_evaluate:FirstLegal"]
 METRICS = ["steps", "total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
            "takeoffs", "failed_takeoffs", "landings", "mean_delay_min", "collisions",
            "avoided_conflicts", "separation_losses", "contacts", "battery_depletions",
-           "completed_trips"]
+           "stranded_air", "stranded_ground", "stranded", "service_min_lost", "completed_trips"]
 
 
 class FirstLegal(Controller):

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from marl_vertiport.config import EnvConfig
+from marl_vertiport.sim.energy import FlightEnergy, local_route
 from marl_vertiport.sim.geometry import (
     cpa, segment_distance, swept_min_distance, swept_min_distance_pair,
 )
@@ -114,9 +115,12 @@ class EpisodeMetrics:
     separation_losses: int = 0
     contacts: int = 0
     battery_depletions: int = 0
+    stranded_air: int = 0
+    stranded_ground: int = 0
     action_counts: np.ndarray | None = None
 
-    def summary(self, delay_min_per_vehicle: np.ndarray) -> dict[str, Any]:
+    def summary(self, delay_min_per_vehicle: np.ndarray, service_min_lost: float = 0.0) -> dict[str, Any]:
+        """The metrics; ``service_min_lost`` is the minutes from each lost vehicle's loss to now."""
         return {
             "steps": self.steps,
             "total_reward": float(self.total_reward),
@@ -132,6 +136,10 @@ class EpisodeMetrics:
             "separation_losses": self.separation_losses,
             "contacts": self.contacts,
             "battery_depletions": self.battery_depletions,
+            "stranded_air": self.stranded_air,
+            "stranded_ground": self.stranded_ground,
+            "stranded": self.stranded_air + self.stranded_ground,
+            "service_min_lost": float(service_min_lost),
             "completed_trips": self.completed_trips,
             "action_counts": self.action_counts.tolist() if self.action_counts is not None else [],
         }
@@ -177,6 +185,7 @@ class VertiportSim:
         self._noisy_obs = un.position_noise_std_m > 0 or un.position_noise_mean_m != 0
         self._agent_names = tuple(f"evtol_{i}" for i in range(self.n))
         self._fixed_masks = self._status_masks()
+        self.energy = FlightEnergy(config, self.layout)
         # exp(-delay) by delay: delays take few distinct values (whole minutes in the shipped
         # configs), and a memo is cheaper than numpy's exp on a scalar.
         self._exp_neg_delay: dict[float, float] = {}
@@ -219,6 +228,8 @@ class VertiportSim:
         self.plan_vel_xy = np.zeros((n, 2))
         self.conflict = np.zeros(n, dtype=bool)
         self.obs_xy = np.zeros((n, 2))
+        self.lost = np.zeros(n, dtype=bool)  # stranded: in the air or on the ground for good
+        self.lost_min = np.zeros(n)  # minute at the end of the step in which it was lost
 
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new day: vehicles placed on random ports (then hover spots), full batteries,
@@ -302,16 +313,7 @@ class VertiportSim:
 
     def _local_route(self, v: int, node: int) -> list[np.ndarray]:
         """Route at hover altitude from the vehicle to vertiport node ``node``."""
-        alt = self.cfg.flight.hover_altitude_m
-        x, y, z = self.pos[v]
-        nx, ny = self.layout.node_xy_m[node]
-        route = []
-        if abs(z - alt) > 1e-9:
-            route.append(np.array([x, y, alt]))
-        route.append(np.array([nx, ny, alt]))
-        if abs(self._node_pos[node, 2] - alt) > 1e-9:
-            route.append(self._node_pos[node].copy())
-        return route
+        return local_route(self.pos[v], self._node_pos[node], self.cfg.flight.hover_altitude_m)
 
     # ================================================================== masks
     def action_mask(self, v: int) -> np.ndarray:
@@ -331,9 +333,28 @@ class VertiportSim:
             else:
                 mask[acts.takeoff] = 1
                 mask[2:2 + self.layout.n_ports] = free[: self.layout.n_ports]
+            atc = self.cfg.atc
+            if atc.energy_check:  # clear only flights the battery can finish, with the reserve
+                node = self.node.item(v)
+                budget = self.battery.item(v) - atc.energy_reserve_pct
+                mask[2:2 + self.layout.n_nodes] &= self.energy.hop_pct[node] < budget
+                if s != HOVERING:
+                    mask[acts.takeoff] = self.energy.trip_pct[node, self.dest.item(v)] < budget
             mask.setflags(write=False)
         self._mask_cache[v] = mask
         return mask
+
+    def flight_energy_pct(self, v: int, action: int) -> float:
+        """Battery (percent, no gusts) that ``action`` (a take-off or a move to a node) of vehicle
+        ``v``, on the ground or hovering at a node, needs to be finished; 0 for other actions."""
+        node = self.node.item(v)
+        if node < 0:
+            return 0.0
+        if action == self.actions.takeoff and self._is_port[node]:
+            return float(self.energy.trip_pct[node, self.dest.item(v)])
+        if 2 <= action < 2 + self.layout.n_nodes:
+            return float(self.energy.hop_pct[node, action - 2])
+        return 0.0
 
     def _status_masks(self) -> tuple[np.ndarray | None, ...]:
         """By status code, the read-only mask of a status whose legal actions do not depend on
@@ -484,6 +505,7 @@ class VertiportSim:
                             if u < un.charger_failure_prob]
         info["charger_failures"] = len(failed_nodes)
         info["battery_depletions"] = self._update_battery(status_during, failed_nodes)
+        info["stranded_ground"] = self._mark_stranded_on_ground()
         self.minute += self.minutes_per_step
         self.step_count += 1
         self._update_delays()
@@ -529,7 +551,8 @@ class VertiportSim:
         return self.step_count >= self.cfg.schedule.episode_steps
 
     def episode_metrics(self) -> dict[str, Any]:
-        return self.metrics.summary(self.completed_delay + self.delay)
+        lost_min = float(np.sum(self.minute - self.lost_min[self.lost]))
+        return self.metrics.summary(self.completed_delay + self.delay, lost_min)
 
     # ================================================================== action effects
     def _complete_operation(self, v: int, now: float) -> None:
@@ -845,10 +868,56 @@ class VertiportSim:
             return 0
         status = self.status.tolist()
         depleted = [v for v in empty if status[v] != OUT_OF_SERVICE]
+        end = self.minute + self.minutes_per_step
         for v in depleted:
             self._take_out_of_service(v)
+            if not self.lost[v]:
+                self.lost[v] = True
+                self.lost_min[v] = end
+                self.metrics.stranded_air += 1
         self.metrics.battery_depletions += len(depleted)
         return len(depleted)
+
+    def _mark_stranded_on_ground(self) -> int:
+        """Mark the vehicles stranded on the ground in this step; returns how many.
+
+        A vehicle on a normal port is stranded when no flight it may still be cleared for can
+        bring it back into service: its battery does not cover the hop to a usable charging
+        port (one not blocked for the day by a vehicle out of service), or, where no charging
+        port is usable, a take-off (:meth:`stranded_threshold_pct`). Idling only drains it
+        further, so it stays stranded for the rest of the day."""
+        status = self.status.tolist()
+        lost = self.lost.tolist()
+        candidates = [v for v, s in enumerate(status) if s == ON_PORT and not lost[v]]
+        if not candidates:
+            return 0
+        battery = self.battery.tolist()
+        end = self.minute + self.minutes_per_step
+        marked = 0
+        for v in candidates:
+            if battery[v] <= self.stranded_threshold_pct(v):
+                self.lost[v] = True
+                self.lost_min[v] = end
+                marked += 1
+        self.metrics.stranded_ground += marked
+        return marked
+
+    def stranded_threshold_pct(self, v: int) -> float:
+        """Battery (percent) at or below which vehicle ``v``, on the ground at a port, can never
+        charge again: the least energy of a hop to a usable charging port (one not occupied by
+        a vehicle out of service), or of a take-off where no charging port is usable, plus
+        ``atc.energy_reserve_pct`` when the ATC checks energy (the flight is not cleared below
+        that). A vehicle on a working charging port is never stranded (0 is returned)."""
+        node = self.node.item(v)
+        if node < 0 or self.layout.node_type[node] == CHARGING_PORT:
+            return 0.0
+        occupant, status = self.node_occupant.tolist(), self.status.tolist()
+        usable = [c for c in self._charging_nodes.tolist()
+                  if occupant[c] < 0 or status[occupant[c]] != OUT_OF_SERVICE]
+        hop = self.energy.hop_pct[node]
+        need = min(hop[c] for c in usable) if usable else float(self.energy.trip_pct[node, self.dest.item(v)])
+        atc = self.cfg.atc
+        return float(need + (atc.energy_reserve_pct if atc.energy_check else 0.0))
 
     def _take_out_of_service(self, v: int) -> None:
         """Battery depleted in the air: emergency landing where it is, out of service for the
