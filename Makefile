@@ -43,11 +43,15 @@ TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>)
 	$(PY) -m agents.train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG))
 
-evaluate: $(STAMP)  ## evaluate AGENTS on both cases, EPISODES per case (JSON, CSV, figures in runs/eval)
+evaluate: $(STAMP)  ## evaluate AGENTS on both cases, EPISODES per case (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report
+ifdef SUITE
+	$(PY) -m agents.evaluate --suite $(SUITE) --out runs/eval/$(notdir $(basename $(SUITE))) --report runs/eval/$(notdir $(basename $(SUITE)))/report.md
+else
 	$(PY) -m agents.evaluate --agents $(AGENTS) --episodes $(EPISODES) --out runs/eval
+endif
 
-results: $(STAMP)  ## regenerate docs/results.md and its figures (50 episodes per case)
-	$(PY) -m agents.evaluate --agents random fcfs heuristic gcn --episodes 50 --out docs/results --report docs/results.md
+results: $(STAMP)  ## regenerate docs/results.md and its figures (50 episodes per uncertainty level)
+	$(PY) -m agents.evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
 	$(PY) -m agents.render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif

@@ -43,7 +43,7 @@ import yaml
 from agents.base import run_aec_episode
 from agents.files import write_atomic
 from agents.registry import AgentSpecError, make_controller
-from agents.seeds import EVAL_SEEDS
+from agents.seeds import EVAL_SEEDS, parse_seed_range
 
 __all__ = [
     "DEFAULT_AGENTS", "DEFAULT_CONFIGS", "EpisodeRecord", "EpisodeTask", "EvalSettings",
@@ -76,27 +76,72 @@ METRIC_LABELS = {
     "separation_losses": "separation losses",
     "contacts": "contacts",
     "battery_depletions": "depletions",
+    "stranded_air": "lost in the air",
+    "stranded_ground": "lost on the ground",
+    "stranded": "vehicles lost",
+    "service_min_lost": "service lost (min)",
     "completed_trips": "completed trips",
 }
 #: Columns of the printed table (agents as rows).
 TABLE_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                 "mean_delay_min", "collisions", "separation_losses", "battery_depletions")
+                 "mean_delay_min", "collisions", "separation_losses", "stranded_air",
+                 "stranded_ground", "service_min_lost")
 #: Panels of the case-study chart.
 FIGURE_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                  "mean_delay_min", "collisions")
+                  "mean_delay_min", "collisions", "stranded_air", "stranded_ground")
 #: Which way is better for a metric (+1 higher, -1 lower), for the report's generated findings.
 DIRECTION = {"total_reward": 1, "mean_battery_pct": 1, "good_takeoffs": 1, "good_landings": 1,
              "mean_delay_min": -1, "collisions": -1, "separation_losses": -1,
-             "battery_depletions": -1}
+             "battery_depletions": -1, "stranded_air": -1, "stranded_ground": -1,
+             "stranded": -1, "service_min_lost": -1}
 #: The error of a run stopped with Ctrl-C (exit code 130 rather than 1).
 INTERRUPTED = "interrupted (Ctrl-C)"
-CASE_LABELS = {"paper": "case 1, no uncertainty", "paper_uncertain": "case 2, with uncertainty"}
+CASE_LABELS = {"paper": "case 1, no uncertainty", "paper_uncertain": "case 2, with uncertainty",
+               "paper_uncertain_10": "case 2 with every uncertainty at 10 %"}
 
 Overrides = tuple[tuple[str, Any], ...]
 
 
 class InputError(ValueError):
     """Bad command-line input (agent, config, override, episode count); nothing was run."""
+
+
+SUITE_DIR = Path(__file__).resolve().parents[1] / "configs" / "suites"
+
+
+@dataclass(frozen=True)
+class SuiteConfig:
+    """A named evaluation suite (``configs/suites/<name>.yaml``): which agents play which
+    cases on which seeds."""
+
+    name: str
+    configs: tuple[str, ...]
+    """Cases: env config names in configs/env/ or YAML paths."""
+    agents: tuple[str, ...] = DEFAULT_AGENTS
+    seeds: str = ""
+    """``"START:STOP"`` (validation or test seeds); empty: ``EVAL_SEEDS[:episodes]``."""
+    episodes: int = 50
+    """Days per agent and case when ``seeds`` is not given."""
+
+
+def load_suite(spec: str | Path) -> SuiteConfig:
+    """A suite by name (configs/suites/) or YAML path; errors name the file and the key."""
+    from marl_vertiport.config import ConfigError, build_dataclass
+
+    path = Path(spec)
+    if not path.suffix and not path.exists():
+        path = SUITE_DIR / f"{spec}.yaml"
+    if not path.is_file():
+        known = ", ".join(sorted(p.stem for p in SUITE_DIR.glob("*.yaml")))
+        raise InputError(f"suite {str(spec)!r}: no such file (shipped: {known})")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+        suite = build_dataclass(SuiteConfig, data)
+    except (yaml.YAMLError, ConfigError) as exc:
+        raise InputError(f"suite {path}: {exc}") from None
+    if not suite.configs or not suite.agents:
+        raise InputError(f"suite {path}: configs and agents must not be empty")
+    return suite
 
 
 # ============================================================================ settings, tasks
@@ -113,10 +158,22 @@ class EvalSettings:
     bootstrap: int = BOOTSTRAP_RESAMPLES
     bootstrap_seed: int = BOOTSTRAP_SEED
     confidence: float = CONFIDENCE
+    first_seed: int | None = None
+    """Seeds ``first_seed .. first_seed + episodes - 1`` (``--seeds``) instead of
+    ``EVAL_SEEDS[:episodes]``."""
 
     @property
     def seeds(self) -> tuple[int, ...]:
+        if self.first_seed is not None:
+            return tuple(range(self.first_seed, self.first_seed + self.episodes))
         return tuple(EVAL_SEEDS[: self.episodes])
+
+    @property
+    def seeds_rule(self) -> str:
+        """How the seeds were chosen, in words for the report and results.json."""
+        if self.first_seed is not None:
+            return f"--seeds {self.first_seed}:{self.first_seed + self.episodes}"
+        return f"EVAL_SEEDS[:{self.episodes}] (agents.seeds)"
 
     def tasks(self) -> list[EpisodeTask]:
         """Every episode to run, in (agent, case, episode) order."""
@@ -127,7 +184,7 @@ class EvalSettings:
     def to_json(self) -> dict[str, Any]:
         return {"agents": list(self.agents), "configs": list(self.configs),
                 "episodes": self.episodes, "seeds": list(self.seeds),
-                "seeds_rule": f"EVAL_SEEDS[:{self.episodes}] (agents.seeds)",
+                "seeds_rule": self.seeds_rule,
                 "overrides": {k: v for k, v in self.overrides},
                 "bootstrap": {"resamples": self.bootstrap, "seed": self.bootstrap_seed,
                               "confidence": self.confidence, "method": "percentile"}}
@@ -265,7 +322,7 @@ def validate(settings: EvalSettings) -> dict[str, list[str]]:
     """
     from marl_vertiport.config import ConfigError, load_config
 
-    if not 1 <= settings.episodes <= len(EVAL_SEEDS):
+    if settings.first_seed is None and not 1 <= settings.episodes <= len(EVAL_SEEDS):
         raise InputError(f"--episodes must be between 1 and {len(EVAL_SEEDS)}, "
                          f"got {settings.episodes}")
     if settings.bootstrap < 1:
@@ -719,8 +776,11 @@ those still pending at the end, summed per eVTOL and averaged over the fleet.
 eVTOL and it was not told to avoid it (safety term S = -5); *avoided conflicts* are steps with
 S = +5. *Separation losses* (two eVTOLs closer than the minimum separation during a step) and
 *contacts* (two bodies touching) are measured by the physics engine and do not enter the
-reward. *Depletions* count eVTOLs whose battery ran out in the air (they are then out of
-service for the rest of the day). *Completed trips* are touchdowns after a landing clearance.
+reward. *Lost in the air* counts eVTOLs whose battery ran out in flight (an emergency landing;
+out of service for the rest of the day; the paper's battery depletions); *lost on the ground*
+counts eVTOLs left on a normal port with a battery from which no flight the ATC may clear
+reaches a charger (they never serve again that day); *service lost* adds up the minutes from
+each loss to the end of the day. *Completed trips* are touchdowns after a landing clearance.
 """
 
 
@@ -803,7 +863,8 @@ def report_markdown(evaluation: Evaluation, command: str, report_path: Path,
     parts = ["# Evaluation results", "",
              f"Produced by `{command}`.", "",
              f"Every agent played the same {n} evaluation day{'s' if n != 1 else ''} of each case "
-             f"(seeds `EVAL_SEEDS[:{n}]` = {seeds[0]} … {seeds[-1]}, from `agents/seeds.py`), "
+             f"(seeds {seeds[0]} … {seeds[-1]}, `{s.seeds_rule}`; `agents/seeds.py` keeps "
+             "them apart from every training seed), "
              "through the PettingZoo AEC API, with a fresh controller per day. "
              f"Cells are `mean [{pct} % CI]`, the CI being a percentile bootstrap of the mean "
              f"({s.bootstrap} resamples, generator seed {s.bootstrap_seed}). Per-episode numbers "
@@ -873,15 +934,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m agents.evaluate", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--agents", nargs="+", default=list(DEFAULT_AGENTS), metavar="AGENT",
+    parser.add_argument("--agents", nargs="+", default=None, metavar="AGENT",
                         help="controllers to evaluate: built-in names (random, fcfs, heuristic) "
-                             "or import paths 'package.module:Class' (default: %(default)s)")
-    parser.add_argument("--configs", nargs="+", default=list(DEFAULT_CONFIGS), metavar="CONFIG",
+                             f"or import paths 'package.module:Class' (default: {' '.join(DEFAULT_AGENTS)})")
+    parser.add_argument("--configs", nargs="+", default=None, metavar="CONFIG",
                         help="cases: config names in configs/env/ or YAML paths "
-                             "(default: %(default)s = the paper's case 1 and case 2)")
-    parser.add_argument("--episodes", type=int, default=50, metavar="N",
+                             f"(default: {' '.join(DEFAULT_CONFIGS)} = the paper's case 1 and case 2)")
+    parser.add_argument("--episodes", type=int, default=None, metavar="N",
                         help="episodes (days) per agent and case, on seeds EVAL_SEEDS[:N] "
-                             "(default: %(default)s, the paper's protocol)")
+                             "(default: 50, the paper's protocol)")
+    parser.add_argument("--suite", default=None, metavar="NAME",
+                        help="an evaluation suite in configs/suites/ (or a YAML path): its "
+                             "agents, cases and seeds, unless given here too")
+    parser.add_argument("--seeds", default=None, metavar="START:STOP",
+                        help="evaluate on seeds START .. STOP-1 instead (validation seeds "
+                             "800000-999999 for development, test seeds >= 1000000 for "
+                             "reported numbers; training seeds are refused)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
                         help="worker processes; 1 runs in this process "
                              "(default: the number of CPU cores, %(default)s)")
@@ -913,8 +981,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(args_list)
     command = shlex.join(["python", "-m", "agents.evaluate", *args_list])
     try:
-        settings = EvalSettings(agents=_unique(args.agents), configs=_unique(args.configs),
-                                episodes=args.episodes,
+        agents, configs = args.agents or list(DEFAULT_AGENTS), args.configs or list(DEFAULT_CONFIGS)
+        if args.suite is not None:
+            suite = load_suite(args.suite)
+            agents, configs = args.agents or list(suite.agents), args.configs or list(suite.configs)
+            if args.seeds is None and args.episodes is None:
+                if suite.seeds:
+                    args.seeds = suite.seeds
+                else:
+                    args.episodes = suite.episodes
+        episodes, first_seed = 50 if args.episodes is None else args.episodes, None
+        if args.seeds is not None:
+            try:
+                seeds = parse_seed_range(args.seeds)
+            except ValueError as exc:
+                raise InputError(f"--seeds: {exc}") from None
+            if args.episodes is not None and args.episodes != len(seeds):
+                raise InputError(f"--episodes {args.episodes} and --seeds {args.seeds} "
+                                 f"({len(seeds)} seeds) disagree; give one of them")
+            episodes, first_seed = len(seeds), seeds.start
+        settings = EvalSettings(agents=_unique(agents), configs=_unique(configs),
+                                episodes=episodes, first_seed=first_seed,
                                 overrides=parse_overrides(args.overrides),
                                 bootstrap=args.bootstrap, bootstrap_seed=args.bootstrap_seed)
         if args.workers < 1:

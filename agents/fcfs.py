@@ -68,8 +68,8 @@ class FCFSController(Controller):
             self.not_cleared.discard(me)
         self._update_queues(obs)
         if status == HOVERING:
-            if self.landing_queue[:1] != [me]:
-                return obs.stay
+            if self.landing_queue[:1] != [me] and mask[obs.stay]:
+                return obs.stay  # (the ATC lets a vehicle low on battery land out of turn)
             for node_type in (CHARGING_PORT, NORMAL_PORT):
                 free = obs.reachable_nodes(node_type)
                 if free.size:

@@ -138,6 +138,8 @@ class DispatcherController(Controller):
         charger = self._nearest(obs, obs.reachable_nodes(CHARGING_PORT))
         if charger is not None:
             return obs.go_to(charger)
+        if not obs.mask[obs.stay]:  # the ATC clears only landings: the last one it can make
+            return obs.go_to(self._nearest(obs, obs.reachable_nodes(NORMAL_PORT)))
         chargers = np.flatnonzero(obs.ports("type") == CHARGING_PORT)
         need = float(self._landing_pct(obs, chargers).min()) + self.energy_reserve_pct
         after_wait = obs.mine("battery_pct") - self.hover_drain_pct_per_min * self._turn_gap(obs)

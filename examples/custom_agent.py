@@ -25,7 +25,11 @@ class ChargeFirst:
         chargers = [n for n in obs.free_nodes(CHARGING_PORT) if obs.mask[obs.go_to(n)]]
         if chargers and obs.mine("battery_pct") < 90:
             return obs.go_to(chargers[0])
-        return obs.stay if obs.mask[obs.stay] else obs.continue_
+        if obs.mask[obs.stay]:
+            return obs.stay
+        if obs.mask[obs.continue_]:
+            return obs.continue_
+        return int(obs.mask.argmax())  # the ATC clears only landings: take the first one
 
 
 if __name__ == "__main__":

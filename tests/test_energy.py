@@ -102,6 +102,7 @@ def run_steps(sim, n):
         mask = sim.action_mask(sim.acting)
         _, info = sim.step(STAY if mask[STAY] else int(np.flatnonzero(mask)[0]))
         marked += info["stranded_ground"]
+        assert info["vehicles_lost"] == info["stranded_ground"] + info["battery_depletions"]
     return marked
 
 
@@ -144,3 +145,27 @@ def test_depletion_in_the_air_is_stranded_in_the_air():
     m = sim.episode_metrics()
     assert sim.status[3] == OUT_OF_SERVICE and sim.lost[3]
     assert (m["stranded_air"], m["battery_depletions"], m["stranded"]) == (1, 1, 1)
+
+
+@pytest.mark.parametrize("battery, must_land", [(19.6, True), (19.8, False), (60.0, False)])
+def test_hovering_vehicle_must_land_while_it_still_can(battery, must_land):
+    """evtol_3 hovers at spot 7 with normal port 0 free. Holding until its next turn (4 steps,
+    2 % each) must leave the landing on port 0 (hop_pct[7, 0], about 6.67 %) and the 5 % reserve:
+    below that only landings are cleared."""
+    sim = seed0_sim()
+    sim.node_occupant[0] = -1  # port 0 free (evtol_2 leaves it out of this check)
+    sim.battery[3] = battery
+    land = sim.energy.hop_pct[7, 0]
+    assert land == pytest.approx(6.67, abs=0.01)  # 9.5 m across, 3.85 m down
+    mask = sim.action_mask(3)
+    assert mask[2] == 1  # the landing on port 0
+    assert bool(mask[STAY]) == (not must_land)
+    assert bool(mask[2 + 3:2 + 10].any()) == (not must_land)  # moves between hover spots
+    assert mask.sum() >= 1
+
+
+def test_hovering_vehicle_with_nowhere_to_land_may_hold():
+    sim = seed0_sim()  # every port is taken
+    sim.battery[3] = 10.0
+    mask = sim.action_mask(3)
+    assert mask[STAY] == 1 and not mask[2:5].any()

@@ -187,6 +187,10 @@ def test_broken_import_path_exits_2(tmp_path, capsys, spec, words):
     (["--set", "episode_steps"], "KEY=VALUE"),
     (["--configs", "no_such_case"], "no_such_case"),
     (["--episodes", "0"], "--episodes"),
+    (["--seeds", "5:10"], "training seeds"),
+    (["--seeds", "1000010"], "START:STOP"),
+    (["--seeds", "1000010:1000000"], "STOP must be greater"),
+    (["--suite", "no_such_suite"], "no_such_suite"),
 ])
 def test_bad_config_or_options_exit_2(tmp_path, capsys, extra, word):
     assert _run(tmp_path / "out", *extra) == 2
@@ -206,8 +210,8 @@ def test_help_lists_every_option(capsys):
         ev.main(["--help"])
     assert exc.value.code == 0
     text = capsys.readouterr().out
-    for option in ("--agents", "--configs", "--episodes", "--workers", "--out", "--report",
-                   "--set", "--bootstrap", "--bootstrap-seed", "--no-progress"):
+    for option in ("--agents", "--configs", "--episodes", "--seeds", "--suite", "--workers",
+                   "--out", "--report", "--set", "--bootstrap", "--bootstrap-seed", "--no-progress"):
         assert option in text
 
 
@@ -285,3 +289,22 @@ def test_parse_overrides():
         ("layout.hover_spots_xy_m", [[1, 2]]))
     with pytest.raises(ev.InputError):
         ev.parse_overrides(["no_equals_sign"])
+
+
+def test_seed_range_and_suite(tmp_path):
+    """--seeds runs exactly those days; a suite file gives agents, cases and seeds; a seed
+    count that disagrees with --episodes is refused."""
+    argv = ["--agents", "random", "--configs", "paper", "--workers", "1", *TINY]
+    assert ev.main([*argv, "--seeds", "800000:800002", "--out", str(tmp_path / "a")]) == 0
+    assert [r["seed"] for r in _rows(tmp_path / "a" / "episodes.csv")] == ["800000", "800001"]
+    assert ev.main([*argv, "--seeds", "800000:800002", "--episodes", "3",
+                    "--out", str(tmp_path / "b")]) == 2
+    suite = tmp_path / "suite.yaml"
+    suite.write_text("name: mini\nagents: [fcfs]\nconfigs: [small]\nseeds: '1000500:1000501'\n")
+    assert ev.main(["--suite", str(suite), "--workers", "1", *TINY,
+                    "--out", str(tmp_path / "c")]) == 0
+    rows = _rows(tmp_path / "c" / "episodes.csv")
+    assert [(r["agent"], r["config"], r["seed"]) for r in rows] == [("fcfs", "small", "1000500")]
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\nconfigs: [paper]\nepisodez: 3\n")
+    assert ev.main(["--suite", str(bad), "--out", str(tmp_path / "d")]) == 2

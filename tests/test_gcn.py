@@ -93,11 +93,50 @@ def test_gcn_output_is_invariant_to_the_order_of_the_fleet():
     with torch.no_grad():
         torch.testing.assert_close(actor.logits(shuffled), actor.logits(obs))
         torch.testing.assert_close(critic(shuffled), critic(obs))
-        # ... but not to the order of the ports, whose identity the node actions refer to.
-        ports = obs.clone()
-        ports["port_nodes"] = obs["port_nodes"][:, torch.tensor([1, 0, 2, 3, 4, 5, 6, 7, 8, 9])]
-        ports["port_nodes"][..., 0] = torch.tensor([1.0, 0, 0, 1, 0, 1, 0, 1, 1, 0])
-        assert not torch.allclose(actor.logits(ports), actor.logits(obs))
+
+
+def test_reordering_nodes_of_a_type_permutes_the_node_action_probabilities():
+    """Hover spots (nodes 3-9 of the paper layout) listed in another order: the probability of
+    "go to spot k" moves with spot k; the other actions keep theirs."""
+    torch.manual_seed(2)
+    obs = example_obs(2)
+    actor = GraphActor(obs, {"actor": list(POLICY_GROUPS)}, "actor", 1, feature_names("observation"))
+    perm = torch.tensor([0, 1, 2, 5, 9, 3, 8, 4, 7, 6])  # new node j is old node perm[j]
+    cols = torch.cat([torch.tensor([0, 1]), perm + 2, torch.tensor([12, 13])])
+    shuffled = obs.clone()
+    shuffled["port_nodes"] = obs["port_nodes"][:, perm]
+    shuffled["action_mask"] = obs["action_mask"][:, cols]
+    # a hovering row makes the spots legal actions
+    shuffled["action_mask"][:, 2:12] = True
+    full = obs.clone()
+    full["action_mask"][:, 2:12] = True
+    with torch.no_grad():
+        p = actor.action_probabilities(full)
+        q = actor.action_probabilities(shuffled)
+    torch.testing.assert_close(q, p[:, cols])
+    assert not torch.allclose(p[:, 5], p[:, 6])  # the spots are told apart (by position)
+
+
+def test_lost_vehicle_penalty_by_hand():
+    """The learner's reward is the paper's reward less the penalty per vehicle lost in the
+    step: evtol_2 at 0 % on a normal port is stranded in the first step."""
+    cfg = load_config("paper", **{"atc.energy_check": False})
+    rewards = []
+    for penalty in (0.0, 40.0):
+        env = MultiAgentVecEnv(cfg, num_envs=1, seed=0, lost_vehicle_penalty=penalty)
+        sim = env.envs[0].sim
+        on_port = [v for v in range(sim.n) if sim.status[v] == 0]
+        sim.battery[on_port[-1]] = 0.0
+        acting = int(env.acting_rows()[0])
+        actions = torch.zeros(env.num_envs, 1)  # stay
+        _, r, _, _ = env.step(actions)
+        paper = env.envs[0].rewards[env.envs[0].possible_agents[acting]]
+        assert int(sim.lost.sum()) == 1
+        rewards.append((float(r[0]), paper))
+        env.close()
+    (r0, paper0), (r1, paper1) = rewards
+    assert r0 == pytest.approx(paper0) and paper1 == pytest.approx(paper0)
+    assert r1 == pytest.approx(paper0 - 40.0)
 
 
 # ------------------------------------------------------------------ parity of the two paths
@@ -197,18 +236,33 @@ def test_bad_checkpoints_are_refused_clearly(tmp_path):
     torch.save({"foo": 1}, tmp_path / "other.pt")
     with pytest.raises(CheckpointError, match="not a marl_vertiport training checkpoint"):
         GCNController(tmp_path / "other.pt")
-    # A checkpoint of a 3-eVTOL fleet refuses observations of the 4-eVTOL paper layout.
+    # A checkpoint made with another observation schema is refused, both schemas named.
     small = tmp_path / "small.yaml"
     small.write_text("base: paper\nfleet_size: 3\n")
     final = train(tiny_config("single_agent", iterations=1, env_config=str(small)),
                   tmp_path / "small", log=lambda *_: None, evaluate=False)
-    ctl = GCNController(final)
+    data = torch.load(final, weights_only=False)
+    data["infos"]["marl_vertiport"]["feature_schema"]["ports"].append("altitude_m")
+    torch.save(data, tmp_path / "other_schema.pt")
+    with pytest.raises(CheckpointError, match="altitude_m"):
+        GCNController(tmp_path / "other_schema.pt")
+
+
+def test_checkpoint_of_one_layout_acts_legally_a_full_day_on_others(tmp_path):
+    """Trained on the paper's ports with 3 eVTOLs, it flies a whole day on a 5-eVTOL layout
+    with two chargers and on a 6-eVTOL layout with 14 nodes; every action it takes is legal
+    (the env raises on an illegal one)."""
+    from agents.base import run_aec_episode
     from marl_vertiport import vertiport_v0
 
-    env = vertiport_v0.env()
-    env.reset(seed=0)
-    with pytest.raises(CheckpointError, match="evtol_nodes of shape"):
-        ctl.act(env.observe(env.agent_selection))
+    small = tmp_path / "small.yaml"
+    small.write_text("base: paper\nfleet_size: 3\n")
+    final = train(tiny_config("multi_agent", iterations=1, env_config=str(small)),
+                  tmp_path / "small", log=lambda *_: None, evaluate=False)
+    ctl = GCNController(final)
+    for config in ("mid", "twin"):
+        metrics = run_aec_episode(vertiport_v0.env(config=config), ctl, 1_000_000)
+        assert metrics["steps"] == 1440
 
 
 def test_nan_in_training_stops_with_the_iteration_named(tmp_path, monkeypatch):

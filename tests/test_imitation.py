@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from agents.gcn.imitation import (
-    DayTask, _with_battery, collect, fit_actor, label_day, label_weights, make_teacher,
+    DayTask, _learner, _with_battery, collect, fit_actor, label_day, label_weights, make_teacher,
+    round_tasks,
 )
 from agents.gcn.models import GraphActor
 from agents.gcn.policy import GCNController
@@ -43,10 +44,9 @@ def test_fit_then_learner_drives_a_dagger_day():
     first = fit_actor(actor, data, 1, 64, 1e-3, 0, lambda *_: None, "bc", regret_cap=50.0)
     last = fit_actor(actor, data, 20, 64, 1e-3, 0, lambda *_: None, "bc")
     assert last["cross_entropy"] < first["cross_entropy"] and last["accuracy"] > 0.8
-    cfg = to_dict(TrainConfig())
-    cfg["model"] = {"hidden": 16, "hidden_dims": [32]}
-    learner = {"actor_state_dict": actor.state_dict(),
-               "infos": {"marl_vertiport": {"env_config": env_cfg, "train_config": cfg}}}
+    cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
+                                        "model": {"hidden": 16, "hidden_dims": [32]}})
+    learner = _learner(actor, env_cfg, cfg)
     dagger, metrics = label_day(DayTask(env_cfg, 3, 40, "heuristic", 4, learner=learner))
     assert metrics["steps"] == 40 and len(dagger["label"]) > 0
     with pytest.raises(ValueError, match="teacher"):
@@ -115,3 +115,24 @@ def test_round_tasks_mix_seeds_noise_and_low_batteries():
     assert [t.steps for t in scoring] == [1440] * 2 and all(t.learner for t in scoring)
     seeds = [t.seed for r in range(4) for t in round_tasks(cfg, env_cfg, r, None, last=False)]
     assert len(set(seeds)) == len(seeds) and max(seeds) < 1_000_000  # new per round, not eval seeds
+
+
+def test_days_of_different_vertiports_are_padded_to_one_size():
+    """A round across scenarios: the 3-eVTOL paper ports (10 nodes) and the 6-eVTOL twin
+    layout (13 nodes) padded to 13 nodes and 6 eVTOLs; labels stay legal, padded node actions
+    and rows are marked."""
+    configs = [to_dict(load_config("paper", fleet_size=3)), to_dict(load_config("twin"))]
+    cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()), "pretrain": {
+        "days": 2, "day_steps": 30, "starts": 0, "low_battery_starts": 0, "teacher": "heuristic"}})
+    tasks = round_tasks(cfg, configs, 0, None, last=False)
+    assert [t.env_config["fleet_size"] for t in tasks] == [3, 6]
+    data, _ = collect(tasks, 1, lambda *_: None, "demo", sizes=(13, 6))
+    n = len(data["label"])
+    assert data["port_nodes"].shape == (n, 13, 4) and data["evtol_nodes"].shape == (n, 6, 13)
+    assert data["action_mask"].shape == (n, 17)
+    assert data["action_mask"][np.arange(n), data["label"]].all()
+    small = ~data["port_valid"][:, 10]  # rows of the 10-node vertiport
+    assert small.any() and (~small).any()
+    assert not data["action_mask"][small][:, 12:15].any()  # its padded node actions
+    assert (data["evtol_valid"][small].sum(axis=1) == 3).all()
+    assert (data["port_nodes"][small][:, 10:] == 0).all()

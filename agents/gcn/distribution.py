@@ -28,11 +28,13 @@ def masked_logits(logits: torch.Tensor, mask: torch.Tensor | None) -> torch.Tens
 
 
 class MaskedCategorical(Distribution):
-    """Categorical over ``num_choices`` actions with a legal-action mask.
+    """Categorical over the actions of a row's logits with a legal-action mask.
 
     Args:
         output_dim: rsl_rl's action dimension; must be 1 (one discrete action per row).
-        num_choices: number of discrete actions (the width of the logits).
+        num_choices: width of the model's MLP head output (``input_dim``, which rsl_rl sizes
+            the head by). A model may append more logits to it (the GCN actor appends one per
+            vertiport node), so the distribution takes its width from the logits it is given.
     """
 
     def __init__(self, output_dim: int, num_choices: int) -> None:
@@ -46,7 +48,7 @@ class MaskedCategorical(Distribution):
 
     # ------------------------------------------------------------------ state
     def update(self, mlp_output: torch.Tensor, mask: torch.Tensor | None = None) -> None:
-        """Set the distribution from logits ``(B, num_choices)`` and a mask ``(B, num_choices)``."""
+        """Set the distribution from logits ``(B, A)`` and a mask ``(B, A)``."""
         self._logits = masked_logits(mlp_output, mask)
         self._log_probs = torch.log_softmax(self._logits, dim=-1)
 
@@ -68,19 +70,19 @@ class MaskedCategorical(Distribution):
 
     @property
     def probs(self) -> torch.Tensor:
-        """``(B, num_choices)``; exactly 0 on illegal actions."""
+        """``(B, A)``; exactly 0 on illegal actions."""
         return self._log_probs.exp()
 
     @property
     def mean(self) -> torch.Tensor:
         """Expected action index, ``(B, 1)`` (logged by rsl_rl only)."""
-        idx = torch.arange(self.num_choices, device=self._logits.device, dtype=self._logits.dtype)
+        idx = torch.arange(self._logits.shape[-1], device=self._logits.device, dtype=self._logits.dtype)
         return (self.probs * idx).sum(-1, keepdim=True)
 
     @property
     def std(self) -> torch.Tensor:
         """Standard deviation of the action index, ``(B, 1)`` (rsl_rl logs its mean)."""
-        idx = torch.arange(self.num_choices, device=self._logits.device, dtype=self._logits.dtype)
+        idx = torch.arange(self._logits.shape[-1], device=self._logits.device, dtype=self._logits.dtype)
         var = (self.probs * (idx - self.mean) ** 2).sum(-1, keepdim=True)
         return var.clamp_min(0).sqrt()
 

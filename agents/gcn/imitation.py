@@ -36,7 +36,8 @@ import torch
 from tensordict import TensorDict
 
 from agents.files import write_atomic
-from agents.seeds import training_seed
+from agents.gcn.padding import pad_observation, to_padded_action
+from agents.seeds import WARM_START_SEED_BASE, training_seed
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).
 ACTOR_GROUPS = ("port_nodes", "evtol_nodes", "self", "action_mask")
@@ -123,11 +124,23 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     return data, metrics
 
 
-def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag: str
+def pad_day(data: dict[str, np.ndarray], max_nodes: int, max_evtols: int) -> dict[str, np.ndarray]:
+    """A day's decisions padded to ``max_nodes`` vertiport nodes and ``max_evtols`` eVTOLs
+    (agents/gcn/padding.py), labels moved to the padded action space."""
+    n_nodes = data["port_nodes"].shape[1]
+    out = pad_observation({k: data[k] for k in ACTOR_GROUPS}, max_nodes, max_evtols)
+    out["label"] = np.asarray(to_padded_action(data["label"], n_nodes, max_nodes), dtype=np.int64)
+    out["regret"] = data["regret"]
+    return out
+
+
+def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag: str,
+            sizes: tuple[int, int] | None = None
             ) -> tuple[dict[str, np.ndarray], list[dict[str, Any]]]:
     """Run ``tasks`` on ``workers`` spawned processes (1: in this process), logging each day;
     returns their decisions concatenated in task order and each task's metrics, the same for
-    any number of workers."""
+    any number of workers. ``sizes``: ``(max_nodes, max_evtols)`` to pad every day to (days
+    of different vertiports)."""
     start = time.time()
     results: list[tuple[dict[str, np.ndarray], dict[str, Any]]] = []
 
@@ -136,7 +149,8 @@ def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag:
         m = result[1]
         log(f"  {tag}: episode {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
             f"{m.get('steps', 0)} steps, reward {m.get('total_reward', float('nan')):.0f}, "
-            f"depletions {m.get('battery_depletions', 0)}, {len(result[0]['label'])} decisions")
+            f"lost {m.get('stranded_air', 0)} air / {m.get('stranded_ground', 0)} ground, "
+            f"{len(result[0]['label'])} decisions")
 
     if workers <= 1:
         for task in tasks:
@@ -151,7 +165,10 @@ def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag:
             # In task order, not finishing order: the fit's data, and so the run, do not
             # depend on which worker finished first.
             ordered = [fut.result() for fut in futures]
-    data = {k: np.concatenate([r[0][k] for r in ordered]) for k in ordered[0][0]}
+    days = [r[0] for r in ordered]
+    if sizes is not None:
+        days = [pad_day(d, *sizes) for d in days]
+    data = {k: np.concatenate([d[k] for d in days]) for k in days[0]}
     return data, [r[1] for r in ordered]
 
 
@@ -159,6 +176,9 @@ def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
     """Collected arrays as the actor's observation groups (mask as bool), rows first."""
     out = {k: torch.from_numpy(np.ascontiguousarray(data[k])).float() for k in ACTOR_GROUPS[:3]}
     out["action_mask"] = torch.from_numpy(data["action_mask"]).bool()
+    for key in ("port_valid", "evtol_valid"):
+        if key in data:
+            out[key] = torch.from_numpy(np.ascontiguousarray(data[key])).bool()
     return TensorDict(out, batch_size=[len(data["label"])])
 
 
@@ -213,33 +233,39 @@ def _with_battery(env_config: dict[str, Any], pct: float) -> dict[str, Any]:
 
 def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
     """The actor's weights as checkpoint content a worker can load (see GCNController)."""
+    from agents.gcn.training import feature_names
     from marl_vertiport.config import to_dict
 
+    first = env_config[0] if isinstance(env_config, list) else env_config
     return {"actor_state_dict": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()},
-            "infos": {"marl_vertiport": {"env_config": env_config, "train_config": to_dict(cfg)}}}
+            "infos": {"marl_vertiport": {"env_config": first, "train_config": to_dict(cfg),
+                                         "feature_schema": feature_names("observation")}}}
 
 
-def round_tasks(cfg, env_config: dict[str, Any], round_: int, learner: dict[str, Any] | None,
-                last: bool) -> list[DayTask]:
+def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: int,
+                learner: dict[str, Any] | None, last: bool) -> list[DayTask]:
     """The episodes of warm-start round ``round_`` (``last``: the round that only scores the
-    last fit, full days alone).
+    last fit, full days alone). With a list of env configs (scenarios), episode ``d`` of each
+    kind runs config ``d mod len(list)``.
 
-    Seeds of their own, below the evaluation seeds and apart from PPO's episodes, new in every
-    round: ``pretrain.days`` full days, then ``starts`` day starts (the start of a day, all
+    Seeds of their own, in the training range (agents/seeds.py), new in every round: ``pretrain.days`` full days, then ``starts`` day starts (the start of a day, all
     batteries full and every vehicle placed at random, is where an imitation's early error
     costs most), then ``low_battery_starts`` day starts with every battery at the levels of
     ``low_battery_pct`` in turn (a fleet that cannot all be charged in time shows the teacher's
     triage, which its own days rarely reach). Random actions (``noise``) go into the day starts
     only: the full days score the fits as they are."""
     pre = cfg.pretrain
-    base = 900_000 + cfg.seed * 1000 + round_ * 100
-    lengths = [pre.day_steps] * pre.days + ([] if last else [pre.start_steps] * pre.starts)
-    configs = [env_config] * len(lengths)
+    scenarios = env_config if isinstance(env_config, list) else [env_config]
+    base = WARM_START_SEED_BASE + cfg.seed * 1000 + round_ * 100
+    n_starts = 0 if last else pre.starts
+    lengths = [pre.day_steps] * pre.days + [pre.start_steps] * n_starts
+    configs = ([scenarios[d % len(scenarios)] for d in range(pre.days)]
+               + [scenarios[d % len(scenarios)] for d in range(n_starts)])
     if not last:
         levels = [pre.low_battery_pct[i % len(pre.low_battery_pct)]
                   for i in range(pre.low_battery_starts)]
         lengths += [pre.start_steps] * len(levels)
-        configs += [_with_battery(env_config, pct) for pct in levels]
+        configs += [_with_battery(scenarios[i % len(scenarios)], pct) for i, pct in enumerate(levels)]
     return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
                     pre.rollout_margin, learner, pre.noise if d >= pre.days else 0.0)
             for d, (conf, steps) in enumerate(zip(configs, lengths))]
@@ -247,17 +273,28 @@ def round_tasks(cfg, env_config: dict[str, Any], round_: int, learner: dict[str,
 
 #: Day metrics averaged per warm-start round for the learning curve (``warmstart.csv``).
 ROUND_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                 "mean_delay_min", "collisions", "separation_losses", "battery_depletions")
+                 "mean_delay_min", "collisions", "separation_losses", "battery_depletions",
+                 "stranded_air", "stranded_ground", "stranded", "service_min_lost")
 
 
-def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None] = print,
+def day_score(metrics: dict[str, Any], lost_vehicle_penalty: float) -> float:
+    """What a fit is scored by on a day it drove: the paper's total reward minus
+    ``lost_vehicle_penalty`` per vehicle lost (the training reward's lost-vehicle term)."""
+    return float(metrics["total_reward"]) - lost_vehicle_penalty * float(metrics["stranded"])
+
+
+def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
+               log: Callable[[str], None] = print,
                state_path: Path | None = None,
                on_round: Callable[[dict[str, float]], None] | None = None) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
     docstring); ``cfg`` is the :class:`~agents.gcn.training.TrainConfig`.
 
-    Each fit's actor is scored by the mean reward of the full days it drives in the next round
-    (the last one by a round of days of its own, not fit on); the actor keeps the weights of
+    ``env_config``: the env config, or a list of them (scenarios; days are padded to the
+    largest vertiport and fleet of the list).
+
+    Each fit's actor is scored by the mean :func:`day_score` of the full days it drives in the
+    next round (the last one by a round of days of its own, not fit on); the actor keeps the weights of
     the best-scoring fit, as DAgger prescribes (it returns the best of its iterates, not
     necessarily the last). Returns the last fit's statistics, the teacher's mean reward on the
     days it drives, each fit's score and the fit kept.
@@ -274,7 +311,15 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
     # What the saved progress must have been made with to be continued.
     # (Not the worker count: the data does not depend on it.)
     made_with = {"pretrain": {k: v for k, v in dataclasses.asdict(pre).items() if k != "workers"},
-                 "seed": cfg.seed, "env_config": env_config, "model": dataclasses.asdict(cfg.model)}
+                 "seed": cfg.seed, "env_config": env_config, "model": dataclasses.asdict(cfg.model),
+                 "lost_vehicle_penalty": cfg.lost_vehicle_penalty}
+    sizes = None
+    if isinstance(env_config, list):
+        from marl_vertiport.config import from_dict
+        from marl_vertiport.sim.layout import Layout
+
+        built = [from_dict(c) for c in env_config]
+        sizes = (max(Layout.from_config(c).n_nodes for c in built), max(c.fleet_size for c in built))
     state: dict[str, Any] = {"next_round": 0, "data": None, "fits": [], "scores": [], "stats": {},
                              "records": [], "env_steps": 0, "made_with": made_with}
     if state_path is not None and state_path.exists():
@@ -302,14 +347,15 @@ def warm_start(actor, cfg, env_config: dict[str, Any], log: Callable[[str], None
             f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, the "
             f"{pre.teacher} teacher labels ({pre.workers} worker{'s' if pre.workers != 1 else ''})")
-        new, metrics = collect(tasks, pre.workers, log, tag)
+        new, metrics = collect(tasks, pre.workers, log, tag, sizes)
         full = [m for m in metrics if m["steps"] == pre.day_steps]
-        days = [m["total_reward"] for m in full] or [float("nan")]
+        days = [day_score(m, cfg.lost_vehicle_penalty) for m in full] or [float("nan")]
         if learner is None:
             stats["teacher_reward"] = float(np.mean(days))
         else:
             scores.append(float(np.mean(days)))
-            log(f"  fit {len(scores) - 1} scores {scores[-1]:.0f} (mean reward of its days)")
+            log(f"  fit {len(scores) - 1} scores {scores[-1]:.0f} (mean reward of its days, "
+                f"less {cfg.lost_vehicle_penalty:g} per vehicle lost)")
         state["env_steps"] += int(sum(m["steps"] for m in metrics))
         record = {"round": float(round_), "driver": 0.0 if learner is None else 1.0,
                   "env_steps": float(state["env_steps"]),

@@ -1,8 +1,10 @@
 """A trained GCN checkpoint as a controller (``act(observation) -> action``).
 
-The checkpoint carries the env config it was trained on; an observation whose graph sizes or
-action count differ (another layout or fleet) is refused with both shapes named, and a file that
-is not a complete training checkpoint is refused when it is loaded.
+The models are size-agnostic: a checkpoint acts on any vertiport layout and fleet size. It
+carries the feature schema it was trained with (the column names of the observation groups);
+a checkpoint whose schema differs from this version's, or an observation whose feature columns
+do not match it, is refused with both named, and a file that is not a complete training
+checkpoint is refused when it is loaded.
 """
 
 from __future__ import annotations
@@ -63,13 +65,20 @@ class GCNController(Controller):
             data = read_checkpoint(self.path)
         self.name = f"gcn:{self.path.name}"
         meta = data["infos"]["marl_vertiport"]
+        schema = feature_names("observation")
+        if meta.get("feature_schema") != schema:
+            raise CheckpointError(
+                f"checkpoint {self.path} was trained on observation features "
+                f"{meta.get('feature_schema', '(not recorded: a fixed-size model of format 1)')}, "
+                f"this version observes {schema}; retrain it (make train)")
         env_cfg = from_dict(meta["env_config"])
         model = meta["train_config"]["model"]
         probe = raw_env(config=env_cfg)
         probe.reset(seed=0)
         example = self._tensors(probe.observe(probe.possible_agents[0]))
         probe.close()
-        self.expected = {k: tuple(v.shape[1:]) for k, v in example.items()}
+        self.feature_counts = {"port_nodes": len(schema["ports"]), "evtol_nodes": len(schema["evtols"]),
+                               "self": len(schema["extra"])}
         groups = {"actor": ["port_nodes", "evtol_nodes", "self"]}
         self.actor = GraphActor(example, groups, "actor", 1, feature_names("observation"),
                                 hidden=model["hidden"], hidden_dims=model["hidden_dims"])
@@ -97,11 +106,15 @@ class GCNController(Controller):
 
     def act(self, observation: dict) -> int:
         obs = self._tensors(observation)
-        for key, shape in self.expected.items():
-            if tuple(obs[key].shape[1:]) != shape:
+        for key, count in self.feature_counts.items():
+            if obs[key].shape[-1] != count:
                 raise CheckpointError(
-                    f"checkpoint {self.path} was trained on {key} of shape {shape}, but the env "
-                    f"gives {tuple(obs[key].shape[1:])}: another layout, fleet size or action count")
+                    f"checkpoint {self.path} reads {key} with {count} feature columns, but the "
+                    f"observation has {obs[key].shape[-1]}: another observation schema")
+        n_nodes = obs["port_nodes"].shape[1]
+        if obs["action_mask"].shape[-1] != 4 + n_nodes:
+            raise CheckpointError(f"action mask of width {obs['action_mask'].shape[-1]} for "
+                                  f"{n_nodes} vertiport nodes: expected {4 + n_nodes}")
         with torch.no_grad():
             if self.deterministic:
                 return int(self.actor(obs).item())

@@ -33,6 +33,7 @@ import yaml
 
 from agents.files import write_atomic
 from agents.gcn.imitation import ROUND_METRICS, TEACHERS, warm_start
+from agents.seeds import VALIDATION_SEED_BASE
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.sim.core import (
     CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
@@ -40,7 +41,7 @@ from marl_vertiport.sim.core import (
 )
 
 TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2  # 2: size-agnostic models, the feature schema in the metadata
 #: Columns of ``warmstart.csv``: one row per warm-start round (``driver`` 0: the teacher drove,
 #: 1: the actor); ``env_steps`` counts demonstration steps so far; the last row's ``kept_round``
 #: is the round whose days the fit kept for PPO drove.
@@ -50,7 +51,8 @@ WARM_STATE = "warmstart_state.pt"
 CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_loss", "surrogate_loss",
               "entropy", "learning_rate", "total_reward", "mean_battery_pct", "good_takeoffs",
               "good_landings", "mean_delay_min", "collisions", "separation_losses",
-              "battery_depletions")
+              "battery_depletions", "stranded_air", "stranded_ground", "stranded",
+              "service_min_lost")
 
 
 # ------------------------------------------------------------------------------ config schema
@@ -134,6 +136,14 @@ class TrainConfig:
     mode: str = "multi_agent"
     """``multi_agent`` (AEC, one row per eVTOL, critic on ``state()``) or ``single_agent``."""
     env_config: str = "paper"
+    """The env config of the run (the end-of-training evaluation's first case)."""
+    scenarios: tuple[str, ...] = ()
+    """Env configs to train across (multi-agent mode): PPO's copies and the warm start's days
+    cycle through them. Empty: ``env_config`` alone."""
+    lost_vehicle_penalty: float = 0.0
+    """Subtracted from the reward the learner sees for each vehicle lost in a step (stranded
+    in the air or on the ground); the warm start scores its fits the same way. Evaluation
+    reports the paper's reward. 0: the paper's reward."""
     num_envs: int = 32
     num_steps_per_env: int = 32
     iterations: int = 250
@@ -182,6 +192,10 @@ class TrainConfig:
              and all(0.0 < b <= 100.0 for b in self.pretrain.low_battery_pct),
              "pretrain.low_battery_pct", "a non-empty list of levels in (0, 100]"),
             (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
+            (not self.scenarios or self.mode == "multi_agent", "scenarios",
+             "training across scenarios needs mode multi_agent (the single-agent vector env "
+             "holds copies of one vertiport)"),
+            (self.lost_vehicle_penalty >= 0, "lost_vehicle_penalty", "must be >= 0"),
             (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),
         ]
         for ok, name, msg in checks:
@@ -237,13 +251,20 @@ def runner_config(cfg: TrainConfig) -> dict[str, Any]:
     }
 
 
+def scenario_configs(cfg: TrainConfig) -> list:
+    """The env configs a run trains on (``scenarios``, or ``env_config`` alone), loaded."""
+    return [load_config(name) for name in (cfg.scenarios or (cfg.env_config,))]
+
+
 def make_vec_env(cfg: TrainConfig):
     from agents.gcn.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
 
     if cfg.mode == "multi_agent":
-        return MultiAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device,
-                                seed=cfg.seed, team_reward=cfg.team_reward)
-    return SingleAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device, seed=cfg.seed)
+        return MultiAgentVecEnv(scenario_configs(cfg), num_envs=cfg.num_envs, device=cfg.device,
+                                seed=cfg.seed, team_reward=cfg.team_reward,
+                                lost_vehicle_penalty=cfg.lost_vehicle_penalty)
+    return SingleAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device, seed=cfg.seed,
+                             lost_vehicle_penalty=cfg.lost_vehicle_penalty)
 
 
 class TrainingDiverged(RuntimeError):
@@ -281,8 +302,12 @@ def _make_runner_class():
 
 # ------------------------------------------------------------------------------ checkpoints
 def checkpoint_infos(cfg: TrainConfig, env_cfg) -> dict[str, Any]:
+    """Run metadata stored in every checkpoint: the configs and the actor's feature schema
+    (the column names its weights depend on; layout and fleet sizes do not matter)."""
     return {"marl_vertiport": {"format": CHECKPOINT_FORMAT, "mode": cfg.mode,
-                               "train_config": to_dict(cfg), "env_config": to_dict(env_cfg)}}
+                               "train_config": to_dict(cfg), "env_config": to_dict(env_cfg),
+                               "scenarios": [c.name for c in scenario_configs(cfg)],
+                               "feature_schema": feature_names("observation")}}
 
 
 def latest_checkpoint(run_dir: Path) -> Path | None:
@@ -340,10 +365,13 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
         ("Good operations per episode", [("good_takeoffs", "take-offs"), ("good_landings", "landings")]),
         ("Mean delay per eVTOL (min)", [("mean_delay_min", "delay")]),
         ("Safety events per episode", [("collisions", "collisions (S = -5)"),
-                                       ("separation_losses", "separation losses"),
-                                       ("battery_depletions", "depletions")]),
+                                       ("separation_losses", "separation losses")]),
+        ("Vehicles lost per episode", [("stranded_air", "in the air"),
+                                       ("stranded_ground", "on the ground"),
+                                       ("stranded", "all")]),
     ]
-    fig, axes = plt.subplots(2, 3, figsize=(14, 7.5))
+    fig, axes = plt.subplots(2, 4, figsize=(18, 7.5))
+    axes.ravel()[-1].axis("off")
     for ax, (panel_title, series) in zip(axes.ravel(), panels):
         first = panel_title.startswith("Total")
         if warm_rows:
@@ -447,7 +475,9 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
             if rank == 0:
                 write_curves(warm_path, warm_rows, WARM_CURVE_KEYS)
 
-        stats = warm_start(runner.alg.actor, cfg, to_dict(env_cfg), log=log,
+        warm_envs = ([to_dict(c) for c in scenario_configs(cfg)] if cfg.scenarios
+                     else to_dict(env_cfg))
+        stats = warm_start(runner.alg.actor, cfg, warm_envs, log=log,
                            state_path=state_path, on_round=on_round)
         if stats:
             runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
@@ -483,7 +513,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         if math.isfinite(row.get("total_reward", float("nan"))):
             msg += (f"  | day: reward {row['total_reward']:7.1f} battery {row['mean_battery_pct']:4.1f}% "
                     f"good TO/LD {row['good_takeoffs']:4.1f}/{row['good_landings']:4.1f} "
-                    f"delay {row['mean_delay_min']:6.1f} coll {row['collisions']:4.1f}")
+                    f"delay {row['mean_delay_min']:6.1f} coll {row['collisions']:4.1f} "
+                    f"lost {row['stranded_air']:3.1f} air/{row['stranded_ground']:3.1f} ground")
         log(f"{msg}  eta {eta / 60:4.1f} min")
 
     warmup_end = cfg.critic_warmup_iterations
@@ -500,7 +531,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     runner.on_iteration = hook
     runner.install_hook()
     if remaining > 0:
-        log(f"training {cfg.mode} on {cfg.env_config}: {remaining} iterations of "
+        where = ", ".join(cfg.scenarios) if cfg.scenarios else cfg.env_config
+        log(f"training {cfg.mode} on {where}: {remaining} iterations of "
             f"{samples_per_it} env steps ({cfg.num_envs} copies x {cfg.num_steps_per_env})")
         runner.learn(remaining)
     final = latest_checkpoint(run_dir)
@@ -511,9 +543,12 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     if evaluate and cfg.evaluation.episodes > 0 and final is not None:
         from agents.evaluate import main as evaluate_main
 
-        log(f"evaluating {final.name} against {', '.join(cfg.evaluation.agents)} on held-out seeds")
-        evaluate_main(["--agents", str(final), *cfg.evaluation.agents, "--episodes",
-                       str(cfg.evaluation.episodes), "--out", str(run_dir / "eval")])
+        first = VALIDATION_SEED_BASE
+        seeds = f"{first}:{first + cfg.evaluation.episodes}"
+        log(f"evaluating {final.name} against {', '.join(cfg.evaluation.agents)} on validation "
+            f"seeds {seeds} (test seeds stay for reported numbers)")
+        evaluate_main(["--agents", str(final), *cfg.evaluation.agents, "--seeds", seeds,
+                       "--out", str(run_dir / "eval")])
     return final
 
 

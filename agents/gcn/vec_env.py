@@ -6,7 +6,18 @@ Observation groups (a flat TensorDict with a leading row dimension):
   bool: the observation of the eVTOL a row acts for;
 - multi-agent mode only: ``state_port_nodes (R, P, 5)``, ``state_evtol_nodes (R, N, 17)``,
   ``state_clock (R, 3)``: the global ``state()`` with ``is_self`` marking the row's eVTOL, for
-  the centralised critic.
+  the centralised critic; ``port_valid (R, P)`` and ``evtol_valid (R, N)`` bool mark the real
+  nodes when the copies run different vertiports (below).
+
+**Scenarios** (multi-agent mode): the copies may run a list of env configs (copy ``k`` runs
+config ``k mod len(configs)``) with different layouts and fleets. Every copy's graphs are then
+padded to the largest ``P`` and ``N`` of the list and its action space to ``A = 4 + P``
+(agents/gcn/padding.py); a copy with fewer eVTOLs has rows that never act (only "stay" legal).
+
+**Lost-vehicle penalty** (``lost_vehicle_penalty``, both modes): the reward the learner sees is
+the paper's reward minus the penalty for each vehicle lost in the step (stranded in the air or
+on the ground, ``sim.lost``): a documented training term; the episode metrics keep the paper's
+reward.
 
 **Multi-agent** (:class:`MultiAgentVecEnv`, CTDE): the PettingZoo AEC env, one row per (copy,
 eVTOL), ``R = K * N``. Each step every copy advances one AEC step: the acting eVTOL's row acts
@@ -37,13 +48,15 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
+from agents.gcn.padding import from_padded_action, pad_action_mask
 from agents.seeds import training_seed
 from marl_vertiport.config import EnvConfig, load_config
 from marl_vertiport.sim.core import EVTOL_FEATURES, SELF_FEATURES
 
 #: Episode metrics logged by rsl_rl (averaged over the episodes that end in an iteration).
 LOGGED_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                  "mean_delay_min", "collisions", "separation_losses", "battery_depletions")
+                  "mean_delay_min", "collisions", "separation_losses", "battery_depletions",
+                  "stranded_air", "stranded_ground", "stranded", "service_min_lost")
 POLICY_GROUPS = ("port_nodes", "evtol_nodes", "self")
 STATE_GROUPS = ("state_port_nodes", "state_evtol_nodes", "state_clock")
 
@@ -52,8 +65,9 @@ class _VertiportVecEnv(VecEnv):
     """What both adapters share: config, row bookkeeping, action conversion, episode extras."""
 
     def __init__(self, config: str | EnvConfig, num_envs: int, rows_per_env: int,
-                 device: str = "cpu", seed: int = 0) -> None:
+                 device: str = "cpu", seed: int = 0, lost_vehicle_penalty: float = 0.0) -> None:
         self.env_config = load_config(config)
+        self.lost_vehicle_penalty = float(lost_vehicle_penalty)
         self.num_copies = int(num_envs)
         self.rows_per_env = rows_per_env
         self.num_envs = self.num_copies * rows_per_env
@@ -97,20 +111,33 @@ class _VertiportVecEnv(VecEnv):
 
 
 class MultiAgentVecEnv(_VertiportVecEnv):
-    """One row per (env copy, eVTOL); see the module docstring."""
+    """One row per (env copy, eVTOL); see the module docstring.
 
-    def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
-                 seed: int = 0, team_reward: bool = True) -> None:
+    Args:
+        config: the env config, or a list of them (scenarios, cycled over the copies).
+    """
+
+    def __init__(self, config: str | EnvConfig | list = "paper", num_envs: int = 8,
+                 device: str = "cpu", seed: int = 0, team_reward: bool = True,
+                 lost_vehicle_penalty: float = 0.0) -> None:
         from marl_vertiport.vertiport_v0 import raw_env
 
-        cfg = load_config(config)
-        super().__init__(cfg, num_envs, cfg.fleet_size, device, seed)
+        configs = [load_config(c) for c in (config if isinstance(config, (list, tuple)) else [config])]
+        if not configs:
+            raise ValueError("MultiAgentVecEnv needs at least one env config")
+        max_n = max(c.fleet_size for c in configs)
+        super().__init__(configs[0], num_envs, max_n, device, seed, lost_vehicle_penalty)
+        self.scenarios = configs
+        self.cfg["env_config"] = [c.name for c in configs]
         self.team_reward = team_reward
-        self.envs = [raw_env(config=cfg) for _ in range(self.num_copies)]
+        self.envs = [raw_env(config=configs[k % len(configs)]) for k in range(self.num_copies)]
         for env in self.envs:
             env.reset(seed=self._next_seed())
-        sim = self.envs[0].sim
-        n, p, a = sim.n, sim.layout.n_nodes, sim.actions.n
+        sims = [env.sim for env in self.envs]
+        self.padded = len({(sim.n, sim.layout.n_nodes) for sim in sims}) > 1
+        n, p = max_n, max(sim.layout.n_nodes for sim in sims)
+        self.max_nodes, self.max_evtols = p, n
+        a = 4 + p
         k = self.num_copies
         st = self.envs[0].state()
         self._buf = {
@@ -118,12 +145,18 @@ class MultiAgentVecEnv(_VertiportVecEnv):
             "evtol_nodes": np.zeros((k, n, n, 13), np.float32),
             "self": np.zeros((k, n, 11), np.float32),
             "action_mask": np.zeros((k, n, a), np.int8),
-            "state_port_nodes": np.zeros((k, n) + st["port_nodes"].shape, np.float32),
-            "state_evtol_nodes": np.zeros((k, n) + st["evtol_nodes"].shape, np.float32),
+            "state_port_nodes": np.zeros((k, n, p, st["port_nodes"].shape[-1]), np.float32),
+            "state_evtol_nodes": np.zeros((k, n, n, st["evtol_nodes"].shape[-1]), np.float32),
             "state_clock": np.zeros((k, n) + st["clock"].shape, np.float32),
         }
+        if self.padded:
+            self._buf["port_valid"] = np.zeros((k, n, p), bool)
+            self._buf["evtol_valid"] = np.zeros((k, n, n), bool)
+            for c, sim in enumerate(sims):
+                self._buf["port_valid"][c, :, : sim.layout.n_nodes] = True
+                self._buf["evtol_valid"][c, :, : sim.n] = True
         self._noop_mask = np.zeros(a, np.int8)
-        self._noop_mask[sim.actions.stay] = 1
+        self._noop_mask[sims[0].actions.stay] = 1
         self._eye = np.eye(n, dtype=np.float32)
         self._is_self = EVTOL_FEATURES.index("is_self")
         self._n_self = len(SELF_FEATURES)
@@ -132,21 +165,23 @@ class MultiAgentVecEnv(_VertiportVecEnv):
     def _observe_copy(self, k: int) -> None:
         env, buf = self.envs[k], self._buf
         sim = env.sim
+        n, p = sim.n, sim.layout.n_nodes
         state = sim.state_arrays()
-        # The state's port columns 0-3 are the observation's port features.
-        buf["port_nodes"][k] = state["port_nodes"][:, : buf["port_nodes"].shape[-1]]
+        # The state's port columns 0-3 are the observation's port features; padded rows and
+        # the rows of absent eVTOLs stay zero.
+        buf["port_nodes"][k, :, :p] = state["port_nodes"][:, : buf["port_nodes"].shape[-1]]
         base = sim._evtol_base()
         evtol = buf["evtol_nodes"][k]
-        evtol[:] = base
-        evtol[:, :, self._is_self] = self._eye
-        buf["self"][k] = base[:, : self._n_self]
+        evtol[:, :n] = base
+        evtol[:, :n, self._is_self] = self._eye[:, :n]
+        buf["self"][k, :n] = base[:, : self._n_self]
         masks = buf["action_mask"][k]
         masks[:] = self._noop_mask
-        masks[sim.acting] = sim.action_mask(sim.acting)
-        buf["state_port_nodes"][k] = state["port_nodes"]
+        masks[sim.acting] = pad_action_mask(sim.action_mask(sim.acting), p, self.max_nodes)
+        buf["state_port_nodes"][k, :, :p] = state["port_nodes"]
         st_evtol = buf["state_evtol_nodes"][k]
-        st_evtol[:] = state["evtol_nodes"]
-        st_evtol[:, :, self._is_self] = self._eye
+        st_evtol[:, :n] = state["evtol_nodes"]
+        st_evtol[:, :n, self._is_self] = self._eye[:, :n]
         buf["state_clock"][k] = state["clock"]
 
     def _observe_all(self) -> TensorDict:
@@ -167,15 +202,18 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         dones = np.zeros_like(rewards, dtype=bool)
         finished = []
         for k, env in enumerate(self.envs):
-            v = env.sim.acting
-            env.step(int(acts[k, v]))
+            sim = env.sim
+            v = sim.acting
+            lost_before = int(sim.lost.sum())
+            env.step(from_padded_action(int(acts[k, v]), sim.layout.n_nodes, self.max_nodes))
             reward = env.rewards[env.possible_agents[v]]
+            reward -= self.lost_vehicle_penalty * (int(sim.lost.sum()) - lost_before)
             if self.team_reward:
                 rewards[k] = reward  # every eVTOL of the copy shares the fleet's reward
             else:
                 rewards[k, v] = reward
-            if env.sim.truncated:
-                finished.append(env.sim.episode_metrics())
+            if sim.truncated:
+                finished.append(sim.episode_metrics())
                 dones[k] = True
                 env.reset(seed=self._next_seed())
         dones_t = torch.from_numpy(dones.reshape(-1)).to(self.device)
@@ -197,13 +235,13 @@ class SingleAgentVecEnv(_VertiportVecEnv):
     """One row per env copy, vectorised with supersuit; see the module docstring."""
 
     def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
-                 seed: int = 0, multiprocessing: bool = False) -> None:
+                 seed: int = 0, multiprocessing: bool = False, lost_vehicle_penalty: float = 0.0) -> None:
         import supersuit as ss
 
         from marl_vertiport.gym_env import VertiportEnv
 
         cfg = load_config(config)
-        super().__init__(cfg, num_envs, 1, device, seed)
+        super().__init__(cfg, num_envs, 1, device, seed, lost_vehicle_penalty)
         # multiprocessing: one worker process per copy (gymnasium's AsyncVectorEnv with shared
         # memory; supersuit's concat_vec_envs cannot concatenate nested Dict observations).
         self.venv = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies,
@@ -226,6 +264,9 @@ class SingleAgentVecEnv(_VertiportVecEnv):
         self.episode_length_buf += 1
         self.episode_length_buf[dones_t] = 0
         self._obs = self._convert(obs)
+        if self.lost_vehicle_penalty:
+            lost = np.asarray(info.get("vehicles_lost", np.zeros(len(done))), dtype=np.float32)
+            rewards = np.asarray(rewards, dtype=np.float32) - self.lost_vehicle_penalty * lost
         extras: dict[str, Any] = {"time_outs": torch.from_numpy(np.asarray(truncated)).to(self.device)}
         if done.any() and "episode" in info:
             ep = info["episode"]

@@ -186,6 +186,8 @@ class VertiportSim:
         self._agent_names = tuple(f"evtol_{i}" for i in range(self.n))
         self._fixed_masks = self._status_masks()
         self.energy = FlightEnergy(config, self.layout)
+        # Battery a hovering vehicle spends until its next turn (at most a full round).
+        self._hold_pct = config.battery.hover_drain_pct * self.n
         # exp(-delay) by delay: delays take few distinct values (whole minutes in the shipped
         # configs), and a memo is cheaper than numpy's exp on a scalar.
         self._exp_neg_delay: dict[float, float] = {}
@@ -337,9 +339,15 @@ class VertiportSim:
             if atc.energy_check:  # clear only flights the battery can finish, with the reserve
                 node = self.node.item(v)
                 budget = self.battery.item(v) - atc.energy_reserve_pct
-                mask[2:2 + self.layout.n_nodes] &= self.energy.hop_pct[node] < budget
+                hop = self.energy.hop_pct[node]
+                mask[2:2 + self.layout.n_nodes] &= hop < budget
                 if s != HOVERING:
                     mask[acts.takeoff] = self.energy.trip_pct[node, self.dest.item(v)] < budget
+                else:  # hold only while a landing can still be cleared at the next turn
+                    ports = np.flatnonzero(mask[2:2 + self.layout.n_ports])
+                    if ports.size and budget - self._hold_pct <= hop[ports].min():
+                        mask[acts.stay] = 0
+                        mask[2 + self.layout.n_ports:2 + self.layout.n_nodes] = 0
             mask.setflags(write=False)
         self._mask_cache[v] = mask
         return mask
@@ -504,8 +512,10 @@ class VertiportSim:
             failed_nodes = [node for node, u in zip(self._charging_nodes.tolist(), draws)
                             if u < un.charger_failure_prob]
         info["charger_failures"] = len(failed_nodes)
+        lost_before = self.metrics.stranded_air + self.metrics.stranded_ground
         info["battery_depletions"] = self._update_battery(status_during, failed_nodes)
         info["stranded_ground"] = self._mark_stranded_on_ground()
+        info["vehicles_lost"] = self.metrics.stranded_air + self.metrics.stranded_ground - lost_before
         self.minute += self.minutes_per_step
         self.step_count += 1
         self._update_delays()
