@@ -126,21 +126,14 @@ class SuiteConfig:
 
 def load_suite(spec: str | Path) -> SuiteConfig:
     """A suite by name (configs/suites/) or YAML path; errors name the file and the key."""
-    from marl_vertiport.config import ConfigError, build_dataclass
+    from marl_vertiport.config import ConfigError, load_yaml_dataclass
 
-    path = Path(spec)
-    if not path.suffix and not path.exists():
-        path = SUITE_DIR / f"{spec}.yaml"
-    if not path.is_file():
-        known = ", ".join(sorted(p.stem for p in SUITE_DIR.glob("*.yaml")))
-        raise InputError(f"suite {str(spec)!r}: no such file (shipped: {known})")
     try:
-        data = yaml.safe_load(path.read_text()) or {}
-        suite = build_dataclass(SuiteConfig, data)
-    except (yaml.YAMLError, ConfigError) as exc:
-        raise InputError(f"suite {path}: {exc}") from None
+        suite = load_yaml_dataclass(SuiteConfig, spec, SUITE_DIR, "suite")
+    except ConfigError as exc:
+        raise InputError(str(exc)) from None
     if not suite.configs or not suite.agents:
-        raise InputError(f"suite {path}: configs and agents must not be empty")
+        raise InputError(f"suite {spec}: configs and agents must not be empty")
     return suite
 
 

@@ -63,11 +63,6 @@ FIXED_ACTIONS = 4
 _RELATIVE = 3
 
 
-def feature_schema(names: dict[str, list[str]]) -> dict[str, list[str]]:
-    """What a model's weights depend on: the column names of its three groups."""
-    return {k: list(v) for k, v in names.items()}
-
-
 class FeatureEncoder(nn.Module):
     """Scales numeric columns and one-hot encodes categorical ones: ``(..., F) -> (..., F')``;
     index-valued columns are left out."""

@@ -60,19 +60,14 @@ def pad_observation(arrays: dict[str, np.ndarray], max_nodes: int, max_evtols: i
                     ) -> dict[str, np.ndarray]:
     """One observation's groups (``port_nodes (P, Fp)``, ``evtol_nodes (N, Fe)``, ``self``,
     ``action_mask (4 + P)``, any leading dims) padded to ``P_max`` nodes and ``N_max`` eVTOLs,
-    with ``port_valid`` and ``evtol_valid``. State groups (``state_port_nodes``,
-    ``state_evtol_nodes``) are padded the same way when present; others pass through."""
+    with ``port_valid`` and ``evtol_valid``; other groups pass through."""
     out = dict(arrays)
     ports = arrays["port_nodes"]
     evtols = arrays["evtol_nodes"]
     p, n = ports.shape[-2], evtols.shape[-2]
     lead = ports.shape[:-2]
-    for key in ("port_nodes", "state_port_nodes"):
-        if key in arrays:
-            out[key] = pad_rows(arrays[key], max_nodes, -2)
-    for key in ("evtol_nodes", "state_evtol_nodes"):
-        if key in arrays:
-            out[key] = pad_rows(arrays[key], max_evtols, -2)
+    out["port_nodes"] = pad_rows(ports, max_nodes, -2)
+    out["evtol_nodes"] = pad_rows(evtols, max_evtols, -2)
     out["action_mask"] = pad_action_mask(arrays["action_mask"], p, max_nodes)
     out["port_valid"] = np.broadcast_to(np.arange(max_nodes) < p, lead + (max_nodes,)).copy()
     out["evtol_valid"] = np.broadcast_to(np.arange(max_evtols) < n, lead + (max_evtols,)).copy()

@@ -34,7 +34,9 @@ import yaml
 from agents.files import write_atomic
 from agents.gcn.imitation import ROUND_METRICS, TEACHERS, warm_start
 from agents.seeds import VALIDATION_SEED_BASE
-from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
+from marl_vertiport.config import (
+    ConfigError, build_dataclass, load_config, load_yaml_dataclass, to_dict,
+)
 from marl_vertiport.sim.core import (
     CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
     STATE_PORT_FEATURES,
@@ -205,20 +207,7 @@ class TrainConfig:
 
 def load_train_config(config: str | Path) -> TrainConfig:
     """A name in ``configs/train/`` or a YAML path."""
-    path = Path(config)
-    if not path.suffix and not path.exists():
-        path = TRAIN_CONFIG_DIR / f"{config}.yaml"
-    if not path.is_file():
-        known = ", ".join(sorted(p.stem for p in TRAIN_CONFIG_DIR.glob("*.yaml")))
-        raise ConfigError(f"train config {str(config)!r}: no such file (shipped: {known})")
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
-    try:
-        return build_dataclass(TrainConfig, data)
-    except ConfigError as exc:
-        raise ConfigError(f"{path}: {exc}") from exc
+    return load_yaml_dataclass(TrainConfig, config, TRAIN_CONFIG_DIR, "train config")
 
 
 # ------------------------------------------------------------------------------ rsl_rl wiring

@@ -16,7 +16,7 @@ padded to the largest ``P`` and ``N`` of the list and its action space to ``A = 
 
 **Lost-vehicle penalty** (``lost_vehicle_penalty``, both modes): the reward the learner sees is
 the paper's reward minus the penalty for each vehicle lost in the step (stranded in the air or
-on the ground, ``sim.lost``): a documented training term; the episode metrics keep the paper's
+on the ground, the step's ``info["vehicles_lost"]``): a documented training term; the episode metrics keep the paper's
 reward.
 
 **Multi-agent** (:class:`MultiAgentVecEnv`, CTDE): the PettingZoo AEC env, one row per (copy,
@@ -204,10 +204,9 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         for k, env in enumerate(self.envs):
             sim = env.sim
             v = sim.acting
-            lost_before = int(sim.lost.sum())
             env.step(from_padded_action(int(acts[k, v]), sim.layout.n_nodes, self.max_nodes))
-            reward = env.rewards[env.possible_agents[v]]
-            reward -= self.lost_vehicle_penalty * (int(sim.lost.sum()) - lost_before)
+            agent = env.possible_agents[v]
+            reward = env.rewards[agent] - self.lost_vehicle_penalty * env.infos[agent]["vehicles_lost"]
             if self.team_reward:
                 rewards[k] = reward  # every eVTOL of the copy shares the fleet's reward
             else:
