@@ -228,11 +228,26 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
         tmp_path / "curves.csv")] == [0, 1, 2]
 
 
+class _RunsCode:
+    """Unpickling this object calls ``open(path, "w")``: a stand-in for a hostile file."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
 def test_bad_checkpoints_are_refused_clearly(tmp_path):
     bad = tmp_path / "model_3.pt"
     bad.write_bytes(b"not a checkpoint")
     with pytest.raises(CheckpointError, match="corrupt"):
         GCNController(bad)
+    marker = tmp_path / "ran"
+    torch.save({"actor_state_dict": {}, "infos": _RunsCode(str(marker))}, tmp_path / "hostile.pt")
+    with pytest.raises(CheckpointError, match="corrupt or not a torch file"):
+        GCNController(tmp_path / "hostile.pt")
+    assert not marker.exists()  # the file's pickled call was not made
     torch.save({"foo": 1}, tmp_path / "other.pt")
     with pytest.raises(CheckpointError, match="not a marl_vertiport training checkpoint"):
         GCNController(tmp_path / "other.pt")

@@ -28,7 +28,8 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path}: no such file")
     try:
-        data = torch.load(path, map_location="cpu", weights_only=False)
+        # Tensors and plain data only: code pickled into the file is refused, never run.
+        data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # truncated or foreign file: torch raises many kinds
         raise CheckpointError(f"checkpoint {path} is corrupt or not a torch file "
                               f"({type(exc).__name__}: {exc})") from exc

@@ -16,8 +16,8 @@ padded to the largest ``P`` and ``N`` of the list and its action space to ``A = 
 
 **Lost-vehicle penalty** (``lost_vehicle_penalty``, both modes): the reward the learner sees is
 the paper's reward minus the penalty for each vehicle lost in the step (stranded in the air or
-on the ground, the step's ``info["vehicles_lost"]``): a documented training term; the episode metrics keep the paper's
-reward.
+on the ground, the step's ``info["vehicles_lost"]``): a documented training term; the episode
+metrics keep the paper's reward.
 
 **Multi-agent** (:class:`MultiAgentVecEnv`, CTDE): the PettingZoo AEC env, one row per (copy,
 eVTOL), ``R = K * N``. Each step every copy advances one AEC step: the acting eVTOL's row acts
