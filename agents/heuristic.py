@@ -6,15 +6,24 @@ minutes (the round-robin), so every timing decision looks one turn ahead:
 
 * **Conflicts.** A vehicle in transit that the conflict probe flags is told to avoid; others
   continue.
-* **The charger is the scarce resource.** Landings go to the nearest free charging port. A
-  hovering vehicle keeps hovering (2 %/min) rather than landing on a normal port (4 %/min
-  idle) as long as its battery, after one more turn of hovering, still covers the landing on a
-  charging port; after that it lands on the nearest free port (a vehicle grounded on a pad is
-  better than one that runs empty in the air).
+* **The charger is the scarce resource.** Landings go to the nearest free charging port, and
+  a free charging port goes to the waiting vehicle with the least battery. A hovering vehicle
+  that cannot land on one waits in a **holding pattern beside the charger**: it moves to the
+  free hover spot nearest to a charging port, then on between that spot and the next nearest
+  free one, on paths that keep clear of the ports. In the paper's battery model a vehicle in
+  motion spends 0.5 %/m (1 %/min at the shipped 2 m a step) and one hovering in place
+  2 %/min, so the pattern halves the drain of the wait, and the landing, when the charger
+  frees, is a short one. It waits until the ATC's energy check rules waiting out, then lands
+  on the nearest free port (a vehicle grounded on a pad is better than one that runs empty
+  in the air).
 * **Take-offs.** A vehicle takes off inside its on-time window once it has enough charge for a
   trip; on a charger it keeps charging until full or until its last on-time turn, unless
   another vehicle needs the charger. A vehicle short of charge stays (late beats stranded).
 * **Repositioning.** A vehicle idling on a normal port moves to the nearest free charger.
+
+``DispatcherController(holding=False)`` is the earlier dispatcher without the holding pattern
+and the priority (hovering vehicles wait in place, first come first served); the two are
+compared in ``docs/training.md`` (section "Where the lost vehicles come from").
 
 Every flight it chooses is one the action mask clears, so with the env's energy check
 (``atc.energy_check``) it never starts a flight the battery cannot finish. The energy constants
@@ -27,9 +36,17 @@ from __future__ import annotations
 import numpy as np
 
 from agents.base import (
-    ARRIVING, CHARGING_PORT, HOVER_SPOT, HOVERING, NORMAL_PORT, ON_CHARGER, ON_PORT, Controller,
-    Observation,
+    ARRIVING, CHARGING_PORT, HOVER_SPOT, HOVERING, NORMAL_PORT, ON_CHARGER, ON_PORT, TAXIING,
+    Controller, Observation,
 )
+
+
+def _segment_point_distance_m(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Horizontal distance (m) from each of ``points`` ``(K, 2)`` to the segment ``a``-``b``
+    (each ``(2,)``), shape ``(K,)``."""
+    ab = b - a
+    t = np.clip((points - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+    return np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
 
 
 class DispatcherController(Controller):
@@ -48,6 +65,13 @@ class DispatcherController(Controller):
         hover_altitude_m: altitude of the hover spots (a landing descends that far).
         energy_reserve_pct: the battery a landing must leave over (the env's
             ``atc.energy_reserve_pct``).
+        holding: the holding pattern beside the charger and the neediest-first charger
+            (``False``: hovering vehicles wait in place, the first to get a turn lands).
+        priority_margin_pct: battery gap (percent) that makes a waiting vehicle yield a free
+            charging port to a needier one.
+        port_clearance_m: least horizontal distance (m) between a holding move's path and any
+            port, so that it stays clear of the vehicles climbing from and descending to the
+            ports (the separation minimum, 3 m, plus the vehicle size).
     """
 
     name = "heuristic"
@@ -55,7 +79,9 @@ class DispatcherController(Controller):
     def __init__(self, trip_battery_pct: float = 90.0, hop_battery_pct: float = 12.0,
                  early_release_battery_pct: float = 95.0, on_time_tolerance_min: float = 5.0,
                  hover_drain_pct_per_min: float = 2.0, cruise_drain_pct_per_m: float = 0.5,
-                 hover_altitude_m: float = 4.0, energy_reserve_pct: float = 5.0) -> None:
+                 hover_altitude_m: float = 4.0, energy_reserve_pct: float = 5.0,
+                 holding: bool = True, priority_margin_pct: float = 5.0,
+                 port_clearance_m: float = 4.0) -> None:
         self.trip_battery_pct = trip_battery_pct
         self.hop_battery_pct = hop_battery_pct
         self.early_release_battery_pct = early_release_battery_pct
@@ -64,6 +90,9 @@ class DispatcherController(Controller):
         self.cruise_drain_pct_per_m = cruise_drain_pct_per_m
         self.hover_altitude_m = hover_altitude_m
         self.energy_reserve_pct = energy_reserve_pct
+        self.holding = holding
+        self.priority_margin_pct = priority_margin_pct
+        self.port_clearance_m = port_clearance_m
 
     def act(self, observation: dict) -> int:
         obs = Observation(observation)
@@ -81,13 +110,28 @@ class DispatcherController(Controller):
         """Minutes until this vehicle's next turn (the fleet size, in round-robin order)."""
         return len(obs.fleet("status"))
 
+    @staticmethod
+    def _holding(obs: Observation) -> np.ndarray:
+        """Per vehicle, whether it moves between hover spots (taxiing to a hover spot), ``(N,)``."""
+        status = obs.fleet("status").astype(int)
+        node = obs.fleet("node").astype(int)
+        to_node_type = obs.ports("type")[np.clip(node, 0, None)]
+        return (status == TAXIING) & (node >= 0) & (to_node_type == HOVER_SPOT)
+
+    def _waiting_aloft(self, obs: Observation) -> np.ndarray:
+        """Per vehicle, whether it waits in the air for a landing: hovering, or (with the
+        holding pattern) moving between hover spots, ``(N,)``."""
+        hovering = obs.fleet("status").astype(int) == HOVERING
+        return hovering | self._holding(obs) if self.holding else hovering
+
     def _charger_wanted(self, obs: Observation) -> bool:
         """Whether more other vehicles wait for a charging port than there are free ones:
-        hovering or arriving to land, or idling on a normal port short of charge for a trip."""
+        waiting aloft or arriving to land, or idling on a normal port short of charge for a
+        trip."""
         status = obs.fleet("status").astype(int)
         battery = obs.fleet("battery_pct")
         others = np.arange(len(status)) != obs.me
-        waiting = others & ((status == HOVERING) | (status == ARRIVING)
+        waiting = others & (self._waiting_aloft(obs) | (status == ARRIVING)
                             | ((status == ON_PORT) & (battery < self.trip_battery_pct)))
         return int(waiting.sum()) > obs.free_nodes(CHARGING_PORT).size
 
@@ -135,11 +179,21 @@ class DispatcherController(Controller):
         return obs.stay
 
     def _hovering(self, obs: Observation) -> int:
-        charger = self._nearest(obs, obs.reachable_nodes(CHARGING_PORT))
-        if charger is not None:
-            return obs.go_to(charger)
+        chargers = obs.reachable_nodes(CHARGING_PORT)
+        if self.holding and chargers.size and obs.mask[obs.stay]:
+            others = np.arange(len(obs.fleet("status"))) != obs.me
+            needier = others & self._waiting_aloft(obs) & (
+                obs.fleet("battery_pct") < obs.mine("battery_pct") - self.priority_margin_pct)
+            if int(needier.sum()) >= chargers.size:
+                chargers = chargers[:0]  # yield the charger to a needier vehicle
+        if chargers.size:
+            return obs.go_to(self._nearest(obs, chargers))
         if not obs.mask[obs.stay]:  # the ATC clears only landings: the last one it can make
             return obs.go_to(self._nearest(obs, obs.reachable_nodes(NORMAL_PORT)))
+        if self.holding:
+            spot = self.holding_spot(obs)
+            if spot is not None:
+                return obs.go_to(spot)
         chargers = np.flatnonzero(obs.ports("type") == CHARGING_PORT)
         need = float(self._landing_pct(obs, chargers).min()) + self.energy_reserve_pct
         after_wait = obs.mine("battery_pct") - self.hover_drain_pct_per_min * self._turn_gap(obs)
@@ -148,3 +202,27 @@ class DispatcherController(Controller):
             if port is not None:
                 return obs.go_to(port)
         return obs.stay
+
+    def holding_spot(self, obs: Observation) -> int | None:
+        """The hover spot a hovering vehicle that cannot land on a charger moves to next in the
+        holding pattern (``None``: none it may move to): of the free hover spots other than its
+        own whose straight path from it keeps ``port_clearance_m`` from every port, the one
+        nearest to a charging port."""
+        types = obs.ports("type")
+        spots = np.flatnonzero(types == HOVER_SPOT)
+        chargers = np.flatnonzero(types == CHARGING_PORT)
+        if spots.size == 0 or chargers.size == 0:
+            return None
+        px, py = obs.ports("x_m"), obs.ports("y_m")
+        to_charger_m = np.hypot(px[spots, None] - px[chargers][None],
+                                py[spots, None] - py[chargers][None]).min(axis=1)
+        allowed = (obs.mask[2 + spots] == 1) & (spots != int(obs.mine("node")))
+        ports_xy = np.column_stack([px, py])[types != HOVER_SPOT]
+        here = np.array([obs.mine("x_m"), obs.mine("y_m")])
+        for k in np.flatnonzero(allowed):  # keep clear of the ports' climbs and descents
+            path_end = np.array([px[spots[k]], py[spots[k]]])
+            if _segment_point_distance_m(here, path_end, ports_xy).min() < self.port_clearance_m:
+                allowed[k] = False
+        if not allowed.any():
+            return None
+        return int(spots[allowed][np.argmin(to_charger_m[allowed])])

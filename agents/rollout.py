@@ -106,13 +106,17 @@ class RolloutPlanner(Controller):
                 self.last_forced = True
         return legal.tolist()
 
-    def q_values(self, sim: VertiportSim) -> dict[int, float]:
-        """Sum of rewards over the horizon for each candidate action of the acting vehicle."""
+    def q_values(self, sim: VertiportSim, also: int | None = None) -> dict[int, float]:
+        """Sum of rewards over the horizon for each candidate action of the acting vehicle, and
+        for ``also`` (the base policy's own choice, such as a holding move) if it is not one."""
         scratch, builder, base = self._scratch, self._builder, self.base
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
         q: dict[int, float] = {}
-        for a in self.candidates(sim):
+        actions = self.candidates(sim)
+        if also is not None and also not in actions:
+            actions.append(int(also))
+        for a in actions:
             scratch.restore(snap)
             scratch.rng = np.random.default_rng((self.seed, sim.step_count))
             total, _ = scratch.step(a)
@@ -160,7 +164,7 @@ class RolloutPlanner(Controller):
         if not np.array_equal(observation["action_mask"], sim.action_mask(v)):
             raise RuntimeError("RolloutPlanner: the observation is not that of the bound env's "
                                "acting vehicle")
-        q = self.last_q = self.q_values(sim)
+        q = self.last_q = self.q_values(sim, also=fallback)
         if len(q) < 2:
             return fallback
         best = max(q, key=q.get)

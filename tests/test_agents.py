@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from agents.base import (
-    AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, run_aec_episode, run_gym_episode,
+    AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation, run_aec_episode, run_gym_episode,
 )
 from agents.fcfs import FCFSController
 from agents.heuristic import DispatcherController
@@ -94,6 +94,76 @@ def test_heuristic_avoids_flagged_conflicts_and_uses_the_charger():
     assert ctl.act(obs) == 13  # avoid collision
     hovering = make_obs([{"status": HOVERING, "battery": 60.0, "to_go": 10}], 0, {0, 2})
     assert ctl.act(hovering) == 4  # lands on the charger rather than a normal port
+
+
+def _hold_obs(batteries: list[float], statuses: list[int], free_nodes: set[int],
+              nodes: list[int]) -> dict:
+    """A hand-built observation on the paper's real layout (node positions from the env) for
+    the dispatcher's holding rules: vehicle 0 acts; ``nodes`` gives each vehicle's node."""
+    env = vertiport_v0.env(config="paper")
+    env.reset(seed=0)
+    positions = env.unwrapped.sim.port_nodes()[:, 2:]
+    env.close()
+    obs = make_obs([{"status": s, "battery": b} for s, b in zip(statuses, batteries)], 0, free_nodes)
+    obs["observation"]["port_nodes"][:, 2:] = positions
+    obs["observation"]["evtol_nodes"][:, COL["node"]] = nodes
+    xy = positions[nodes]
+    obs["observation"]["evtol_nodes"][:, COL["x_m"]:COL["y_m"] + 1] = xy
+    return obs
+
+
+def test_dispatcher_holds_beside_the_charger_and_lets_the_neediest_land():
+    ctl, plain = DispatcherController(), DispatcherController(holding=False)
+    # Charger (node 2, at (0, 8)) taken, hover spots 3 and 8 free: from spot 9 it moves to
+    # spot 3, the one nearer to the charger (action 5), where the earlier dispatcher stays.
+    holding = _hold_obs([60.0, 90.0], [HOVERING, ON_CHARGER], {3, 8}, [9, 2])
+    assert ctl.holding_spot(Observation(holding)) == 3
+    assert ctl.act(holding) == 2 + 3
+    assert plain.act(holding) == STAY
+    # Beside the charger (spot 4) it keeps moving, to the free spot 3, never to its own.
+    at_spot = _hold_obs([60.0, 90.0], [HOVERING, ON_CHARGER], {3}, [4, 2])
+    assert ctl.act(at_spot) == 2 + 3
+    # Charger free, but another vehicle waits with 30 %: the 60 % one yields and holds on.
+    yields = _hold_obs([60.0, 30.0], [HOVERING, HOVERING], {2, 3}, [9, 8])
+    assert ctl.act(yields) == 2 + 3
+    assert plain.act(yields) == 4  # first come, first served
+    # Within the priority margin (58 % against 60 %) it takes the charger (action 4).
+    close = _hold_obs([60.0, 58.0], [HOVERING, HOVERING], {2, 3}, [9, 8])
+    assert ctl.act(close) == 4
+    # The ATC rules waiting out (stay masked: landings only): it lands, on the free normal
+    # port, rather than hold; the plain dispatcher makes the same landing.
+    forced = _hold_obs([12.0, 90.0], [HOVERING, ON_CHARGER], {0, 3}, [9, 2])
+    forced["action_mask"][[STAY, 2 + 3]] = 0
+    assert ctl.act(forced) == 2 == plain.act(forced)
+
+
+def test_holding_moves_keep_clear_of_the_ports():
+    # From hover spot 4 (beside the charger), spot 5 is the next nearest to the charger, but
+    # the straight path between them passes within 4 m of the charging port: it goes to spot
+    # 3, whose path keeps clear (or stays if there is no such spot).
+    env = vertiport_v0.env(config="paper")
+    env.reset(seed=0)
+    xy = env.unwrapped.sim.port_nodes()[:, 2:]
+    env.close()
+    a, b, charger = xy[4], xy[5], xy[2]
+    t = np.clip((charger - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+    assert np.linalg.norm(charger - (a + t * (b - a))) < 4.0  # the premise of this test
+    obs = _hold_obs([60.0, 90.0], [HOVERING, ON_CHARGER], {3, 5}, [4, 2])
+    assert DispatcherController().act(obs) == 2 + 3
+    assert DispatcherController(port_clearance_m=0.0).act(obs) == 2 + 5
+    only_close = _hold_obs([60.0, 90.0], [HOVERING, ON_CHARGER], {5}, [4, 2])
+    assert DispatcherController().act(only_close) == STAY
+
+
+def test_dispatcher_counts_holding_vehicles_as_waiting_for_the_charger():
+    # A full vehicle on the charger, inside its window, with a vehicle moving between hover
+    # spots: the plain dispatcher does not see it waiting, the holding one does and releases.
+    fleet = [ON_CHARGER, TAXIING]
+    obs = _hold_obs([100.0, 40.0], fleet, set(), [2, 5])
+    obs["observation"]["evtol_nodes"][0, COL["minutes_to_schedule"]] = 4.0
+    obs["observation"]["evtol_nodes"][1, COL["node"]] = 5  # bound for hover spot 5
+    assert DispatcherController()._charger_wanted(Observation(obs))
+    assert not DispatcherController(holding=False)._charger_wanted(Observation(obs))
 
 
 @pytest.mark.slow
