@@ -11,11 +11,18 @@ and simulates ``horizon`` steps per candidate (tens of milliseconds a decision).
 it as the teacher whose decisions the GCN actor learns to imitate from observations alone
 (``pretrain.teacher: rollout``); ``make evaluate AGENTS=rollout`` scores it like any agent.
 
-Rollouts draw the future (new flight plans, gusts, failures) from a generator of their own,
-the same for every candidate of a decision (common random numbers), never from the env's.
+Rollouts draw the future (new flight plans, and gusts and failures where they are simulated)
+from a generator of their own, the same for every candidate of a decision (common random
+numbers), never from the env's. By default they run on the nominal model (``nominal=True``):
+the env's config without wind gusts, charger failures, take-off failures or observation noise,
+so that a candidate is not judged by a gust or a failure that one rollout happened to draw
+(certainty-equivalent planning; on validation days of the paper's case 2 it scored about 950
+a day against about 150 for rollouts with the uncertainties).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -46,6 +53,8 @@ class RolloutPlanner(Controller):
             easier to learn from observations).
         seed: seed of the rollouts' generator (combined with the env's step count).
         base: the controller rolled out (default: the expert dispatcher).
+        nominal: simulate rollouts without the config's uncertainties (gusts, charger and
+            take-off failures, observation noise); ``False``: with them.
 
     Call :meth:`bind` with the simulator of the env it acts in before the first ``act``
     (the episode runners in :mod:`agents.base` do this for any controller with ``bind``).
@@ -57,7 +66,7 @@ class RolloutPlanner(Controller):
                  min_takeoff_battery_pct: float = 80.0, margin: float = 0.0,
                  min_hover_battery_pct: float = 24.0, stranding_penalty: float = 1000.0,
                  seed: int = 0,
-                 base: Controller | None = None) -> None:
+                 base: Controller | None = None, nominal: bool = True) -> None:
         if horizon < 1:
             raise ValueError(f"horizon must be >= 1 step, got {horizon}")
         if terminal_turns < 0:
@@ -70,6 +79,7 @@ class RolloutPlanner(Controller):
         self.min_hover_battery_pct = float(min_hover_battery_pct)
         self.seed = int(seed)
         self.base = base if base is not None else DispatcherController()
+        self.nominal = bool(nominal)
         self.sim: VertiportSim | None = None
         #: The candidates' values of the last decision (empty where none was simulated).
         self.last_q: dict[int, float] = {}
@@ -80,11 +90,18 @@ class RolloutPlanner(Controller):
         self._builder: ObservationBuilder | None = None
 
     def bind(self, sim: VertiportSim) -> None:
-        """Plan for the env whose simulator is ``sim`` (a scratch copy is built once per config)."""
-        if self._scratch is None or self._scratch.cfg != sim.cfg:
+        """Plan for the env whose simulator is ``sim`` (a scratch copy is built once per config,
+        without its uncertainties when ``nominal``)."""
+        cfg = sim.cfg
+        if self.nominal:
+            cfg = dataclasses.replace(cfg, uncertainty=dataclasses.replace(
+                cfg.uncertainty, wind_gust_prob=0.0, charger_failure_prob=0.0,
+                takeoff_failure_prob=0.0, position_noise_mean_m=0.0, position_noise_std_m=0.0,
+                action_misread_prob=0.0))
+        if self._scratch is None or self._scratch.cfg != cfg:
             if self._scratch is not None:
                 self._scratch.close()
-            self._scratch = VertiportSim(sim.cfg)
+            self._scratch = VertiportSim(cfg)
             self._builder = ObservationBuilder(self._scratch)
         self.sim = sim
 

@@ -11,6 +11,7 @@ from agents.heuristic import DispatcherController
 from agents.registry import make_controller
 from agents.rollout import RolloutPlanner
 from conftest import seed0_sim
+from marl_vertiport import vertiport_v0
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.core import OUT_OF_SERVICE
 
@@ -79,3 +80,22 @@ def test_planner_beats_the_dispatcher_it_rolls_out():
         totals[name] = sum(run_gym_episode(env, ctl, seed)["total_reward"] for seed in (11, 12))
     env.close()
     assert totals["rollout"] > totals["heuristic"] + 100.0
+
+
+def test_rollouts_run_on_the_nominal_model_unless_asked_otherwise():
+    env = vertiport_v0.env(config="paper_uncertain")
+    env.reset(seed=3)
+    sim = env.unwrapped.sim
+    assert sim.cfg.uncertainty.wind_gust_prob > 0  # the premise: the env has uncertainties
+    nominal, noisy = RolloutPlanner(horizon=2), RolloutPlanner(horizon=2, nominal=False)
+    nominal.bind(sim)
+    noisy.bind(sim)
+    un = nominal._scratch.cfg.uncertainty
+    assert un.wind_gust_prob == un.charger_failure_prob == un.takeoff_failure_prob == 0.0
+    assert nominal._scratch.cfg.layout == sim.cfg.layout
+    assert noisy._scratch.cfg == sim.cfg
+    obs = env.observe(env.agent_selection)
+    assert obs["action_mask"][nominal.act(obs)]  # plans on a copy of another config
+    nominal.close()
+    noisy.close()
+    env.close()

@@ -1,0 +1,27 @@
+"""The charger study (agents/capacity.py): its minutes add up, its energy is what the batteries
+gained on the charger, and bad input is refused."""
+
+import pytest
+
+from agents.capacity import charger_day, main, summarise, table
+
+
+@pytest.mark.parametrize("config,chargers", [("paper", 1), ("twin", 2)])
+def test_every_charger_minute_is_accounted_for_once(config, chargers):
+    steps = 150
+    day = charger_day("heuristic", config, 3, 800_003, {"schedule.episode_steps": steps})
+    total = day.approach_min + day.charging_min + day.parked_full_min + day.free_min
+    assert total == pytest.approx(steps * chargers)
+    assert day.sessions >= 1 and day.charging_min > 0
+    # At most 10 % a charging minute (the config's rate), and some charge delivered.
+    assert 0 < day.delivered_pct <= 10.0 * day.charging_min + 1e-9
+    row = summarise([day, day])
+    assert row["fleet_size"] == 3 and row["charging_min"] == day.charging_min
+    assert table([row]).splitlines()[2].startswith("| 3 |")
+
+
+def test_training_seeds_and_bad_fleets_are_refused(capsys):
+    assert main(["--seeds", "0:3"]) == 2
+    assert "training seeds" in capsys.readouterr().err
+    assert main(["--fleet", "0", "--seeds", "800000:800001"]) == 2
+    assert "fleet" in capsys.readouterr().err
