@@ -50,9 +50,10 @@ else
 	$(PY) -m agents.evaluate --agents $(AGENTS) --episodes $(EPISODES) --out runs/eval
 endif
 
-results: $(STAMP)  ## regenerate docs/results.md (50 days per uncertainty level) and docs/results/transfer.md (the transfer suite)
+results: $(STAMP)  ## regenerate docs/results.md (50 days per uncertainty level), docs/results/transfer.md and docs/results/scaling.md (the suites)
 	$(PY) -m agents.evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md
 	$(PY) -m agents.evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md
+	$(PY) -m agents.evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
 	$(PY) -m agents.render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif

@@ -308,3 +308,18 @@ def test_seed_range_and_suite(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: bad\nconfigs: [paper]\nepisodez: 3\n")
     assert ev.main(["--suite", str(bad), "--out", str(tmp_path / "d")]) == 2
+
+
+@pytest.mark.parametrize("path", sorted(ev.SUITE_DIR.glob("*.yaml")), ids=lambda p: p.stem)
+def test_shipped_suites_name_real_configs_agents_and_test_seeds(path):
+    from agents.registry import make_controller
+    from agents.seeds import EVAL_SEED_BASE, parse_seed_range
+    from marl_vertiport import load_config
+
+    suite = ev.load_suite(path.stem)
+    for config in suite.configs:
+        load_config(config)  # raises on an unknown or broken config
+    for agent in suite.agents:
+        assert callable(make_controller(agent).act)
+    seeds = parse_seed_range(suite.seeds)
+    assert seeds.start >= EVAL_SEED_BASE  # reported numbers come from test seeds
