@@ -8,7 +8,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # so `examples` imports
 
-from agents.base import CHARGING_PORT, Observation
+from agents.controllers.base import CHARGING_PORT, Observation
 from agents.evaluate import main as evaluate
 from marl_vertiport import vertiport_v0
 

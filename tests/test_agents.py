@@ -4,13 +4,13 @@ ordering random < FCFS < heuristic on fixed seeds."""
 import numpy as np
 import pytest
 
-from agents.base import (
+from agents.controllers.base import (
     AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation, run_aec_episode, run_gym_episode,
 )
-from agents.fcfs import FCFSController
-from agents.heuristic import DispatcherController
-from agents.registry import AgentSpecError, make_controller
-from agents.seeds import EVAL_SEEDS
+from agents.controllers.fcfs import FCFSController
+from agents.controllers.dispatcher import DispatcherController
+from agents.controllers.registry import AgentSpecError, make_controller
+from agents.common.seeds import EVAL_SEEDS
 from marl_vertiport import vertiport_v0
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.core import EVTOL_FEATURES
@@ -211,8 +211,8 @@ def test_illegal_action_from_a_controller_is_named():
 @pytest.mark.parametrize("spec, message", [
     ("fcsf", "unknown agent 'fcsf'"),
     ("no_such_module:Thing", "cannot import module 'no_such_module'"),
-    ("agents.fcfs:NoSuchClass", "has no attribute 'NoSuchClass'"),
-    ("agents.seeds:EVAL_SEED_BASE", "has no act"),
+    ("agents.controllers.fcfs:NoSuchClass", "has no attribute 'NoSuchClass'"),
+    ("agents.common.seeds:EVAL_SEED_BASE", "has no act"),
 ])
 def test_bad_agent_specs(spec, message):
     with pytest.raises(AgentSpecError, match=message):

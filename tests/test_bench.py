@@ -32,7 +32,7 @@ def test_bench_smoke(tmp_path):
 
 
 def test_api_floor_loop_steps_a_do_nothing_env_through_both_apis():
-    from agents.bench import _api_floor_loop
+    from agents.bench.workloads import _api_floor_loop
 
     for api in ("aec", "single_agent"):
         assert _api_floor_loop(api, 50) > 0  # runs; its value is only reported, never asserted
@@ -42,7 +42,7 @@ def test_engine_replay_repeats_the_recorded_run():
     """The engine-alone measurement replays the pybullet calls of a run of the same seed: the
     recorded run steps the engine exactly as often as a plain run does, and its timed calls
     hold one ``stepSimulation`` per step with motion."""
-    from agents.bench import _EngineCallRecorder, _env_loop, _replay_engine
+    from agents.bench.workloads import _EngineCallRecorder, _env_loop, _replay_engine
     from marl_vertiport.sim import physics as physics_module
 
     plain = _env_loop("single_agent", "paper", 300, seed=3)
@@ -64,7 +64,7 @@ def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeyp
     disconnects its own client through the recorded module; the replay must not follow it."""
     import gc
 
-    import agents.bench as bench
+    import agents.bench.workloads as bench
     from marl_vertiport.gym_env import VertiportEnv
 
     others = [VertiportEnv("paper") for _ in range(2)]
@@ -83,7 +83,7 @@ def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeyp
 
 
 def test_floor_paragraph_names_the_binding_api_and_the_room_left():
-    from agents.bench import _floor_lines
+    from agents.bench.report import _floor_lines
 
     env_rows = [{"api": "aec", "config": "paper", "engine_us_per_step": 4.0, "engine_us_per_moving_step": 50.0},
                 {"api": "single_agent", "config": "paper", "engine_us_per_step": 5.0,

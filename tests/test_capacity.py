@@ -1,9 +1,9 @@
-"""The charger study (agents/capacity.py): its minutes add up, its energy is what the batteries
+"""The charger study (agents/studies/capacity.py): its minutes add up, its energy is what the batteries
 gained on the charger, and bad input is refused."""
 
 import pytest
 
-from agents.capacity import charger_day, main, summarise, table
+from agents.studies.capacity import charger_day, main, summarise, table
 
 
 @pytest.mark.parametrize("config,chargers", [("paper", 1), ("twin", 2)])

@@ -1,4 +1,4 @@
-"""The evaluation command (agents/evaluate.py) on tiny budgets: outputs, determinism across
+"""The evaluation command (agents/evaluate/) on tiny budgets: outputs, determinism across
 worker counts and reruns, bootstrap intervals, bad input (exit 2), an agent that turns illegal
 mid-run (exit 1, partial results kept), and the Markdown report."""
 
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from agents import evaluate as ev
-from agents.base import Controller
-from agents.seeds import EVAL_SEEDS
+from agents.controllers.base import Controller
+from agents.common.seeds import EVAL_SEEDS
 
 ROOT = Path(__file__).resolve().parents[1]
 # The controllers below are loaded by import path (``tests.test_evaluate:...``), also in spawned
@@ -172,7 +172,7 @@ def test_unknown_agent_exits_2_before_running(tmp_path, capsys):
 
 @pytest.mark.parametrize("spec, words", [
     ("tests.no_such_module:Thing", ["tests.no_such_module"]),
-    ("agents.random_agent:NoSuchController", ["agents.random_agent", "NoSuchController"]),
+    ("agents.controllers.random_agent:NoSuchController", ["agents.controllers.random_agent", "NoSuchController"]),
 ])
 def test_broken_import_path_exits_2(tmp_path, capsys, spec, words):
     rc = _run(tmp_path / "out", agents=[spec])
@@ -267,7 +267,7 @@ def test_report_has_tables_and_image_links(serial_run):
 
 
 def test_atomic_write_keeps_old_file_on_failure(tmp_path, monkeypatch):
-    import agents.files as files
+    import agents.common.files as files
 
     path = tmp_path / "episodes.csv"
     files.write_atomic(path, "old\n")
@@ -312,8 +312,8 @@ def test_seed_range_and_suite(tmp_path):
 
 @pytest.mark.parametrize("path", sorted(ev.SUITE_DIR.glob("*.yaml")), ids=lambda p: p.stem)
 def test_shipped_suites_name_real_configs_agents_and_test_seeds(path):
-    from agents.registry import make_controller
-    from agents.seeds import EVAL_SEED_BASE, parse_seed_range
+    from agents.controllers.registry import make_controller
+    from agents.common.seeds import EVAL_SEED_BASE, parse_seed_range
     from marl_vertiport import load_config
 
     suite = ev.load_suite(path.stem)

@@ -15,10 +15,11 @@ from tensordict import TensorDict
 from agents.gcn.distribution import MaskedCategorical
 from agents.gcn.models import GraphActor, GraphCritic
 from agents.gcn.policy import CheckpointError, GCNController
-from agents.gcn.training import (
+from agents.gcn.train.pipeline import (
     TrainConfig, TrainingDiverged, feature_names, latest_checkpoint, runner_config, train,
 )
-from agents.gcn.vec_env import POLICY_GROUPS, STATE_GROUPS, MultiAgentVecEnv, SingleAgentVecEnv
+from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
+from agents.gcn.train.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
 from marl_vertiport.config import build_dataclass, load_config, to_dict
 
 torch.set_num_threads(1)
@@ -215,7 +216,7 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     assert (tmp_path / "curves.csv").exists() and (tmp_path / "learning_curves.png").exists()
     assert not list(tmp_path.glob("*.tmp"))
     ctl = GCNController(final)
-    from agents.base import run_aec_episode
+    from agents.controllers.base import run_aec_episode
     from marl_vertiport import vertiport_v0
 
     metrics = run_aec_episode(vertiport_v0.env(**{"schedule.episode_steps": 20}), ctl, 1)
@@ -224,7 +225,7 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     cfg3 = build_dataclass(TrainConfig, {**to_dict(cfg), "iterations": 3})
     final3 = train(cfg3, tmp_path, resume=True, log=lambda *_: None, evaluate=False)
     assert final3.name == "model_2.pt"
-    assert [int(r["iteration"]) for r in __import__("agents.gcn.training", fromlist=["x"]).read_curves(
+    assert [int(r["iteration"]) for r in __import__("agents.gcn.train.pipeline", fromlist=["x"]).read_curves(
         tmp_path / "curves.csv")] == [0, 1, 2]
 
 
@@ -267,7 +268,7 @@ def test_checkpoint_of_one_layout_acts_legally_a_full_day_on_others(tmp_path):
     """Trained on the paper's ports with 3 eVTOLs, it flies a whole day on a 5-eVTOL layout
     with two chargers and on a 6-eVTOL layout with 14 nodes; every action it takes is legal
     (the env raises on an illegal one)."""
-    from agents.base import run_aec_episode
+    from agents.controllers.base import run_aec_episode
     from marl_vertiport import vertiport_v0
 
     small = tmp_path / "small.yaml"
@@ -326,8 +327,8 @@ def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
 def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
     """A run stopped after the warm start's first round goes on from its saved progress and
     ends with the same warm-started actor as a run never stopped."""
-    import agents.gcn.imitation as imitation
-    from agents.gcn.training import WARM_STATE, read_curves
+    import agents.gcn.train.imitation as imitation
+    from agents.gcn.train.pipeline import WARM_STATE, read_curves
 
     cfg = tiny_config("single_agent", iterations=1,
                       pretrain={"days": 1, "day_steps": 24, "starts": 1, "start_steps": 12,

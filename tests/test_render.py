@@ -1,4 +1,4 @@
-"""The episode renderer (agents/render.py): CLI output, overlay, label placement, errors."""
+"""The episode renderer (agents/render/): CLI output, overlay, label placement, errors."""
 
 import subprocess
 import sys
@@ -9,7 +9,7 @@ import pytest
 from PIL import Image, ImageSequence
 
 from agents import render
-from agents.random_agent import RandomController
+from agents.controllers.random_agent import RandomController
 from marl_vertiport import vertiport_v0
 from marl_vertiport.render import render_frame
 from marl_vertiport.sim.core import AWAY
@@ -144,7 +144,7 @@ def test_unwritable_output_is_a_clear_error(tmp_path, capsys):
 
 
 def test_mp4_without_a_writer_is_a_clear_error(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(render, "_mp4_backend", lambda: None)
+    monkeypatch.setattr(render.cli, "_mp4_backend", lambda: None)
     rc = render.main(["--agent", "random", "--out", str(tmp_path / "x.mp4"), "--no-progress"])
     assert rc == 2
     assert ".mp4 needs imageio-ffmpeg or av" in capsys.readouterr().err
@@ -173,7 +173,7 @@ def test_hhmm():
 
 
 def test_mp4_when_a_writer_is_installed(tmp_path):
-    if render._mp4_backend() is None:
+    if render.video._mp4_backend() is None:
         pytest.skip("no MP4 writer (imageio-ffmpeg or av) installed")
     out = tmp_path / "x.mp4"
     assert render.main(["--agent", "random", "--minutes", "4", "--size", "320x240",

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from agents.base import run_gym_episode
-from agents.heuristic import DispatcherController
-from agents.registry import make_controller
-from agents.rollout import RolloutPlanner
+from agents.controllers.base import run_gym_episode
+from agents.controllers.dispatcher import DispatcherController
+from agents.controllers.registry import make_controller
+from agents.controllers.planner import RolloutPlanner
 from conftest import seed0_sim
 from marl_vertiport import vertiport_v0
 from marl_vertiport.gym_env import VertiportEnv

@@ -1,2 +1,3 @@
-"""The learned ATC: a shared GCN actor, a centralised critic, a masked categorical distribution
-for rsl-rl-lib, vector-env adapters for both training modes, and the training entry point."""
+"""The learned ATC: the graph models (a shared GCN actor, a centralised critic), the masked
+categorical distribution for rsl-rl-lib, the feature schema, observation padding and the
+inference controller (``policy``). Its training lives in :mod:`agents.gcn.train`."""

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
-from agents.base import Controller
+from agents.controllers.base import Controller
 
 
 class CheckpointError(ValueError):
@@ -52,7 +52,7 @@ class GCNController(Controller):
     def __init__(self, path: str | Path | dict[str, Any], deterministic: bool = True,
                  seed: int | None = None) -> None:
         from agents.gcn.models import GraphActor
-        from agents.gcn.training import feature_names
+        from agents.gcn.features import feature_names
         from marl_vertiport.config import from_dict
         from marl_vertiport.vertiport_v0 import raw_env
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.base import Controller
+from agents.controllers.base import Controller
 
 
 class RandomController(Controller):

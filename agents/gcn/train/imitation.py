@@ -2,7 +2,7 @@
 
 Teachers (``pretrain.teacher``):
 
-- ``rollout``: the look-ahead planner of :mod:`agents.rollout` (one step of policy improvement
+- ``rollout``: the look-ahead planner of :mod:`agents.controllers.planner` (one step of policy improvement
   over the expert dispatcher, simulating each candidate action ``pretrain.rollout_horizon``
   steps ahead). It plays clearly better than the dispatcher but reads the simulator and spends
   tens of milliseconds a decision; the actor learns to take its decisions from observations
@@ -35,9 +35,9 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
-from agents.files import write_atomic
+from agents.common.files import write_atomic
 from agents.gcn.padding import pad_observation, to_padded_action
-from agents.seeds import WARM_START_SEED_BASE, training_seed
+from agents.common.seeds import WARM_START_SEED_BASE, training_seed
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).
 ACTOR_GROUPS = ("port_nodes", "evtol_nodes", "self", "action_mask")
@@ -62,8 +62,8 @@ class DayTask:
 
 
 def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: int):
-    from agents.heuristic import DispatcherController
-    from agents.rollout import RolloutPlanner
+    from agents.controllers.dispatcher import DispatcherController
+    from agents.controllers.planner import RolloutPlanner
 
     if name == "rollout":
         return RolloutPlanner(horizon=rollout_horizon, margin=rollout_margin, seed=seed)
@@ -233,7 +233,7 @@ def _with_battery(env_config: dict[str, Any], pct: float) -> dict[str, Any]:
 
 def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
     """The actor's weights as checkpoint content a worker can load (see GCNController)."""
-    from agents.gcn.training import feature_names
+    from agents.gcn.features import feature_names
     from marl_vertiport.config import to_dict
 
     first = env_config[0] if isinstance(env_config, list) else env_config
@@ -248,7 +248,7 @@ def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: 
     last fit, full days alone). With a list of env configs (scenarios), episode ``d`` of each
     kind runs config ``d mod len(list)``.
 
-    Seeds of their own, in the training range (agents/seeds.py), new in every round: ``pretrain.days`` full days, then ``starts`` day starts (the start of a day, all
+    Seeds of their own, in the training range (agents/common/seeds.py), new in every round: ``pretrain.days`` full days, then ``starts`` day starts (the start of a day, all
     batteries full and every vehicle placed at random, is where an imitation's early error
     costs most), then ``low_battery_starts`` day starts with every battery at the levels of
     ``low_battery_pct`` in turn (a fleet that cannot all be charged in time shows the teacher's
@@ -288,7 +288,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                state_path: Path | None = None,
                on_round: Callable[[dict[str, float]], None] | None = None) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
-    docstring); ``cfg`` is the :class:`~agents.gcn.training.TrainConfig`.
+    docstring); ``cfg`` is the :class:`~agents.gcn.train.pipeline.TrainConfig`.
 
     ``env_config``: the env config, or a list of them (scenarios; days are padded to the
     largest vertiport and fleet of the list).

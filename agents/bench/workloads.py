@@ -1,30 +1,11 @@
-"""``python -m agents.bench`` (``make bench``): the speed of the simulator and of training,
-measured on the machine it runs on. Writes ``bench.json`` and a Markdown report.
-
-Measured:
-
-- env steps per second in one process, AEC and single-agent, random legal actions, nominal and
-  uncertain configs, the paper's 4 eVTOLs and the 16-eVTOL ``large`` layout: median and spread
-  over repeats;
-- in the same runs, the time spent inside the physics engine's calls (stepping, body updates,
-  position reads, contacts) and so the ratio of our own overhead to the engine's cost, over all
-  steps and over the steps in which bodies move;
-- the engine alone for the same motion: each run's pybullet calls recorded in a second run of
-  the same seed and replayed, timed, in bare pybullet;
-- a cProfile summary of the AEC env on the paper's layout;
-- vectorised throughput of K env copies with supersuit, in one process and over 2 processes;
-- actor inference latency at batch 1 and 64, training throughput (env samples per second) of
-  ``make train``'s config, and peak memory of an env and of a training run (separate processes).
-
-No number is asserted anywhere: the benchmark reports what it measures.
-"""
+"""What the benchmark measures: env steps per second (AEC and single-agent), the engine's
+share of each step (record and replay in bare pybullet), a profile, vectorised throughput,
+inference latency, training throughput and peak memory. Each function returns plain rows."""
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -34,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.files import write_atomic
+
 
 PAPER_STEPS_PER_S = 5.0  # the paper's AirSim simulator: about 0.2 s per step
 
@@ -307,7 +288,7 @@ def bench_profile(steps: int, top: int = 12) -> dict[str, Any]:
     total = sum(row[2] for row in stats.values())
     per_step = [kv for kv in stats.items() if kv[1][1] >= steps / 100]
     rows = sorted(per_step, key=lambda kv: -kv[1][2])[:top]
-    root = str(Path(__file__).resolve().parents[1])
+    root = str(Path(__file__).resolve().parents[2])
     entries = []
     for (filename, line, name), (_, calls, own, cumulative, _) in rows:
         if "site-packages" in filename:
@@ -323,7 +304,7 @@ def bench_profile(steps: int, top: int = 12) -> dict[str, Any]:
 def bench_vector(steps: int, copies: int) -> list[dict[str, Any]]:
     import torch
 
-    from agents.gcn.vec_env import SingleAgentVecEnv
+    from agents.gcn.train.vec_env import SingleAgentVecEnv
 
     rows = []
     for n_copies, procs in ((copies, 1), (2, 1), (2, 2)):
@@ -348,8 +329,8 @@ def bench_inference(repeats: int = 200) -> list[dict[str, Any]]:
     import torch
 
     from agents.gcn.models import GraphActor
-    from agents.gcn.training import feature_names
-    from agents.gcn.vec_env import POLICY_GROUPS, MultiAgentVecEnv
+    from agents.gcn.features import POLICY_GROUPS, feature_names
+    from agents.gcn.train.vec_env import MultiAgentVecEnv
 
     torch.set_num_threads(1)
     env = MultiAgentVecEnv("paper", num_envs=16)  # 64 rows
@@ -385,7 +366,7 @@ def _child_peak_rss_mb(code: str) -> tuple[float, str]:
              "    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
              "print('PEAK', peak)")
     out = subprocess.run([sys.executable, "-c", code + probe], capture_output=True, text=True,
-                         check=True, cwd=Path(__file__).resolve().parents[1])
+                         check=True, cwd=Path(__file__).resolve().parents[2])
     peak_kb = float(out.stdout.strip().split("PEAK")[-1])
     return peak_kb / 1024.0, out.stdout
 
@@ -394,7 +375,7 @@ def bench_training(iterations: int) -> dict[str, Any]:
     """``make train``'s config for a few PPO iterations (no warm start), in a fresh process."""
     code = (
         "import time, torch, json\n"
-        "from agents.gcn.training import load_train_config, make_vec_env, runner_config\n"
+        "from agents.gcn.train.pipeline import load_train_config, make_vec_env, runner_config\n"
         "from rsl_rl.runners import OnPolicyRunner\n"
         "cfg = load_train_config('default'); torch.set_num_threads(cfg.torch_threads)\n"
         "env = make_vec_env(cfg)\n"
@@ -422,178 +403,3 @@ def bench_env_memory() -> float:
     return peak
 
 
-def _floor_lines(results: dict[str, Any], env_rows: list[dict[str, Any]]) -> list[str]:
-    """The report's paragraph on the API floor (empty for results without one)."""
-    floor = {r["api"]: r["us_per_step"] for r in results.get("api_floor", [])}
-    engine = {r["api"]: r["engine_us_per_step"] for r in env_rows if r["config"] == "paper"}
-    parts = []
-    for api, name in (("aec", "AEC"), ("single_agent", "single-agent")):
-        if api not in floor or api not in engine:
-            continue
-        share = floor[api] / engine[api]
-        verdict = ("so there the ratio over all steps cannot come down to 1.0 whatever the "
-                   "simulator costs" if share >= 1.0 else
-                   f"which leaves {engine[api] - floor[api]:.1f} µs a step for the whole "
-                   "simulator and its observation at a ratio of 1.0")
-        parts.append(f"{floor[api]:.1f} µs a step through the {name} API, {share:.2f} times the "
-                     f"engine's {engine[api]:.1f} µs a step of `paper`, {verdict}")
-    if not parts:
-        return []
-    moving = max(floor.get(r["api"], 0.0) / r["engine_us_per_moving_step"]
-                 for r in env_rows if r["config"] == "paper")
-    return [
-        "- The floor under that ratio: the benchmark loop's API calls and random choice of a "
-        "legal action (without its per-step timers) over an env that does nothing, which "
-        "returns a fixed observation with "
-        "every action legal, the AEC one behind the same order-enforcing wrapper, costs "
-        + "; and ".join(parts) + f". In steps with motion the floor is at most {moving:.2f} "
-        "times the engine's cost; the rest of the ratio there is the simulator's own Python, "
-        "which only a compiled core would bring down to the engine's cost.",
-    ]
-
-
-def report(results: dict[str, Any]) -> str:
-    env_rows = results["env"]
-    ref = next((r for r in env_rows if (r["api"], r["config"]) == ("single_agent", "paper")), env_rows[0])
-    lines = [
-        "# Performance",
-        "",
-        f"Measured by `{results['command']}` on {results['machine']} "
-        f"(Python {results['python']}); regenerate with `make bench`.",
-        "",
-        "## Environment steps per second (one process, random legal actions)",
-        "",
-        "| API | config | steps/s (median) | min - max | µs per step | steps with motion | "
-        "engine µs per step | engine µs per step with motion | engine alone µs per step | "
-        "overhead / engine | overhead / engine, steps with motion | overhead / engine alone | "
-        "x the paper's 5 steps/s |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for r in env_rows:
-        lines.append(f"| {r['api']} | {r['config']} | {r['steps_per_s_median']:,.0f} | "
-                     f"{r['steps_per_s_min']:,.0f} - {r['steps_per_s_max']:,.0f} | "
-                     f"{r['total_us_per_step']:.0f} | {100 * r['moving_fraction']:.0f} % | "
-                     f"{r['engine_us_per_step']:.1f} | {r['engine_us_per_moving_step']:.0f} | "
-                     f"{r['engine_alone_us_per_step']:.1f} | {r['overhead_ratio']:.2f} | "
-                     f"{r['moving_overhead_ratio']:.2f} | {r['overhead_ratio_engine_alone']:.2f} | "
-                     f"{r['times_paper']:,.0f} |")
-    lines += [
-        "",
-        f"{env_rows[0]['repeats']} runs of {env_rows[0]['steps']:,} steps each, in interleaved "
-        "rounds (each round runs every row once); every ratio is the median over the runs of "
-        "the ratio within one run. On this kind of virtual machine the same run varies by up to "
-        "a third from one minute to the next: read the min - max column.",
-        "",
-        "- **engine**: wall time inside the simulator's pybullet calls during the timed run "
-        "(velocity commands, gust forces, stepping at >= 48 Hz of flight time, position reads, "
-        "contact queries, switching bodies between static, dynamic and absent). The engine is "
-        "stepped only in steps in which a body moves (**steps with motion**).",
-        "- **overhead**: the rest of the run's wall time: the simulator's bookkeeping, "
-        "observations, masks, the API layers and the benchmark's own random choice of a legal "
-        "action (about 3 µs a step).",
-        "- **engine alone**: after each timed run, a second run with the same seed records every "
-        "pybullet call with its arguments; the calls of the timed loop are replayed on a fresh "
-        "pybullet client with nothing around them but a Python loop, and timed. "
-        "**overhead / engine alone** is (run time - replay time) / replay time.",
-        "- **overhead / engine, steps with motion**: the same ratio counting only the steps in "
-        "which the engine was stepped (each step timed on its own).",
-        "",
-    ]
-    prof = results.get("profile")
-    if prof:
-        lines += [
-            f"### Where a step's time goes (cProfile, AEC API, `paper`, {prof['steps']:,} steps)",
-            "",
-            "| function | calls per step | own time | with callees |",
-            "|---|---:|---:|---:|",
-        ]
-        for e in prof["top"]:
-            lines.append(f"| `{e['function']}` | {e['calls_per_step']:.2f} | "
-                         f"{100 * e['own_share']:.1f} % | {100 * e['cumulative_share']:.1f} % |")
-        lines += ["", "Functions called at least once every 100 steps; shares of the profiled "
-                  "run's total. The profiler's own cost per call inflates functions that make "
-                  "many small calls.", ""]
-    lines += [
-        "## Vectorised copies (supersuit's `gym_vec_env_v0`, single-agent env, random legal actions)",
-        "",
-        "| copies | processes | env steps/s |",
-        "|---:|---:|---:|",
-    ]
-    for r in results["vector"]:
-        lines.append(f"| {r['copies']} | {r['processes']} | {r['env_steps_per_s']:,.0f} |")
-    lines += ["", "## Policy and training", "", "| measure | value |", "|---|---:|"]
-    for r in results["inference"]:
-        lines.append(f"| actor latency, batch {r['batch']} (median / p90) | "
-                     f"{r['latency_ms_median']:.2f} / {r['latency_ms_p90']:.2f} ms |")
-    t = results["training"]
-    lines += [
-        f"| training throughput (`make train` config, {t['mode']}, {t['iterations']} PPO iterations) | "
-        f"{t['env_steps_per_s']:,.0f} env steps/s |",
-        f"| peak memory, training process | {t['peak_memory_mb']:.0f} MB |",
-        f"| peak memory, one env running a day | {results['env_peak_memory_mb']:.0f} MB |",
-        "",
-        "## Reading these numbers",
-        "",
-        f"- What bounds the overhead ratio: under random legal actions the fleet empties its "
-        f"batteries within the first hours of the day (docs/results.md) and most vehicles are then "
-        f"out of service, so in {100 - 100 * ref['moving_fraction']:.0f} % of the steps "
-        f"({ref['api']}, {ref['config']}) no body moves and the engine is not asked to do anything, "
-        f"while each step still checks the action, advances batteries, schedules and the conflict "
-        f"probe and builds an observation. Per step on average that is "
-        f"{ref['total_us_per_step'] - ref['engine_us_per_step']:.0f} µs of our own work against "
-        f"{ref['engine_us_per_step']:.1f} µs of engine time; in the steps with motion the engine "
-        f"costs {ref['engine_us_per_moving_step']:.0f} µs (12 substeps) and the ratio is "
-        f"{ref['moving_overhead_ratio']:.2f}.",
-        *_floor_lines(results, env_rows),
-        "- Our own cost is spread over many small calls (see the profile): the simulator's step "
-        "(scalar per-vehicle bookkeeping), the observation (eVTOL features built from Python rows, "
-        "one conversion to float32, copies of the port graph, edges and mask) and, in the AEC API, "
-        "the agent iterator of PettingZoo's order-enforcing wrapper (it reads the env through two "
-        "`__getattr__` hops per attribute; the env's own `last()` skips them) and the reward "
-        "and info dicts.",
-        "- The single-agent API skips the AEC wrappers and reward dicts; the larger fleet costs "
-        "less than proportionally more per step (per-vehicle work is a small part of a step).",
-        "- Vector envs in one process pay per-copy Python and the stacking of observations; "
-        "separate processes add inter-process copies of nested Dict observations, which on 2 cores "
-        "costs more than it gains.",
-        "- Training throughput is bounded by the graph models' forward and backward passes on "
-        "batches of up to 128 rows and by stepping 32 env copies in the training process.",
-        "",
-    ]
-    return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m agents.bench", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--steps", type=int, default=20_000, help="env steps per timed run")
-    parser.add_argument("--repeats", type=int, default=5, help="timed runs per measurement")
-    parser.add_argument("--configs", nargs="+", default=["paper", "paper_uncertain", "large"])
-    parser.add_argument("--vector-steps", type=int, default=400)
-    parser.add_argument("--copies", type=int, default=16)
-    parser.add_argument("--train-iterations", type=int, default=5)
-    parser.add_argument("--out", default="runs/bench", help="folder for bench.json")
-    parser.add_argument("--report", default=None, help="write the Markdown report here")
-    args = parser.parse_args(argv)
-    results: dict[str, Any] = {
-        "command": "python -m agents.bench " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores", "python": platform.python_version(),
-    }
-    print("benchmarking (each part in turn) ...", file=sys.stderr)
-    results["env"] = bench_env(args.steps, args.repeats, args.configs)
-    results["api_floor"] = bench_api_floor(args.steps, args.repeats)
-    results["profile"] = bench_profile(args.steps)
-    results["vector"] = bench_vector(args.vector_steps, args.copies)
-    results["inference"] = bench_inference()
-    results["training"] = bench_training(args.train_iterations)
-    results["env_peak_memory_mb"] = bench_env_memory()
-    write_atomic(Path(args.out) / "bench.json", json.dumps(results, indent=2))
-    text = report(results)
-    if args.report:
-        write_atomic(Path(args.report), text)
-    print(text)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -10,14 +10,14 @@ from pathlib import Path
 from typing import Any
 
 #: The trained policy shipped with the repository (see agents/checkpoints/README.md).
-SHIPPED_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "gcn_default.pt"
+SHIPPED_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "gcn_default.pt"
 
 #: Built-in controllers: name -> import path.
 BUILTIN = {
-    "random": "agents.random_agent:RandomController",
-    "fcfs": "agents.fcfs:FCFSController",
-    "heuristic": "agents.heuristic:DispatcherController",
-    "rollout": "agents.rollout:RolloutPlanner",
+    "random": "agents.controllers.random_agent:RandomController",
+    "fcfs": "agents.controllers.fcfs:FCFSController",
+    "heuristic": "agents.controllers.dispatcher:DispatcherController",
+    "rollout": "agents.controllers.planner:RolloutPlanner",
 }
 
 

@@ -26,8 +26,8 @@ import dataclasses
 
 import numpy as np
 
-from agents.base import Controller
-from agents.heuristic import DispatcherController
+from agents.controllers.base import Controller
+from agents.controllers.dispatcher import DispatcherController
 from marl_vertiport.sim.core import HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE, VertiportSim
 from marl_vertiport.sim.layout import HOVER_SPOT
 from marl_vertiport.spaces import ObservationBuilder
@@ -57,7 +57,7 @@ class RolloutPlanner(Controller):
             take-off failures, observation noise); ``False``: with them.
 
     Call :meth:`bind` with the simulator of the env it acts in before the first ``act``
-    (the episode runners in :mod:`agents.base` do this for any controller with ``bind``).
+    (the episode runners in :mod:`agents.controllers.base` do this for any controller with ``bind``).
     """
 
     name = "rollout"
@@ -172,7 +172,7 @@ class RolloutPlanner(Controller):
         sim = self.sim
         if sim is None:
             raise RuntimeError("RolloutPlanner needs the simulator: call bind(env.unwrapped.sim) "
-                               "first (the episode runners of agents.base do)")
+                               "first (the episode runners of agents.controllers.base do)")
         fallback = self.base.act(observation)
         self.last_q, self.last_forced = {}, False
         v = sim.acting

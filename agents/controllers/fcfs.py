@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.base import (
+from agents.controllers.base import (
     ARRIVING, CHARGING_PORT, HOVERING, NORMAL_PORT, ON_CHARGER, ON_PORT, Controller, Observation,
 )
 

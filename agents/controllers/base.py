@@ -144,7 +144,7 @@ def _check_legal(policy: Any, agent: str, action: Any, mask: np.ndarray) -> int:
 
 def _prepare(policy: Any, env: Any, seed: int) -> None:
     """Start ``policy``'s episode: ``reset(seed)``, and ``bind(sim)`` for a model-based
-    controller that plans with the simulator (such as :class:`agents.rollout.RolloutPlanner`)."""
+    controller that plans with the simulator (such as :class:`agents.controllers.planner.RolloutPlanner`)."""
     if hasattr(policy, "reset"):
         policy.reset(seed=seed)
     if hasattr(policy, "bind"):

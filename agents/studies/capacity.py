@@ -6,7 +6,7 @@ charging port: a vehicle *approaching* it (cleared to land on it, not down yet),
 energy delivered, the number of charging sessions and the vehicles lost a day. It is the study
 behind ``docs/training.md`` (section "Where the lost vehicles come from")::
 
-    python -m agents.capacity --agent heuristic --config paper --fleet 3 4 5
+    python -m agents.studies.capacity --agent heuristic --config paper --fleet 3 4 5
 
 Days are validation seeds (800 000 onwards) unless ``--seeds`` says otherwise; training seeds
 are refused. The table goes to stdout (Markdown); ``--csv`` also writes one row per day.
@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.base import _check_legal, _prepare
-from agents.registry import AgentSpecError, make_controller
-from agents.seeds import VALIDATION_SEED_BASE, parse_seed_range
+from agents.controllers.base import _check_legal, _prepare
+from agents.controllers.registry import AgentSpecError, make_controller
+from agents.common.seeds import VALIDATION_SEED_BASE, parse_seed_range
 from marl_vertiport import ConfigError, vertiport_v0
 from marl_vertiport.sim.core import ON_CHARGER
 
@@ -106,7 +106,7 @@ def table(rows: list[dict[str, float]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m agents.capacity", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m agents.studies.capacity", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--agent", default="heuristic", help="controller (default: heuristic)")
     parser.add_argument("--config", default="paper", help="env config (default: paper)")

@@ -9,7 +9,7 @@ the warm start, after the warm start's last finished round.
 
 rsl_rl does the rollouts, PPO updates, logging and checkpoint content; this module only
 configures it, optionally warm-starts the actor by imitation of a teacher (the look-ahead
-planner or the expert dispatcher; see agents/gcn/imitation.py), wraps ``save`` to be atomic and
+planner or the expert dispatcher; see agents/gcn/train/imitation.py), wraps ``save`` to be atomic and
 adds a per-iteration hook (progress line, NaN stop, learning curves).
 """
 
@@ -31,18 +31,15 @@ import numpy as np
 import torch
 import yaml
 
-from agents.files import write_atomic
-from agents.gcn.imitation import ROUND_METRICS, TEACHERS, warm_start
-from agents.seeds import VALIDATION_SEED_BASE
+from agents.common.files import write_atomic
+from agents.gcn.train.imitation import ROUND_METRICS, TEACHERS, warm_start
+from agents.common.seeds import VALIDATION_SEED_BASE
+from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
 from marl_vertiport.config import (
     ConfigError, build_dataclass, load_config, load_yaml_dataclass, to_dict,
 )
-from marl_vertiport.sim.core import (
-    CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
-    STATE_PORT_FEATURES,
-)
 
-TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
+TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[3] / "configs" / "train"
 CHECKPOINT_FORMAT = 2  # 2: size-agnostic models, the feature schema in the metadata
 #: Columns of ``warmstart.csv``: one row per warm-start round (``driver`` 0: the teacher drove,
 #: 1: the actor); ``env_steps`` counts demonstration steps so far; the last row's ``kept_round``
@@ -60,7 +57,7 @@ CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_los
 # ------------------------------------------------------------------------------ config schema
 @dataclass(frozen=True)
 class PretrainConfig:
-    """Warm start of the actor by imitation (agents/gcn/imitation.py)."""
+    """Warm start of the actor by imitation (agents/gcn/train/imitation.py)."""
 
     days: int = 0
     """Days of demonstrations per round (0: no warm start)."""
@@ -211,18 +208,8 @@ def load_train_config(config: str | Path) -> TrainConfig:
 
 
 # ------------------------------------------------------------------------------ rsl_rl wiring
-def feature_names(kind: str) -> dict[str, list[str]]:
-    """Column names of the three observation groups a graph model reads."""
-    if kind == "observation":
-        return {"ports": list(PORT_FEATURES), "evtols": list(EVTOL_FEATURES), "extra": list(SELF_FEATURES)}
-    return {"ports": list(STATE_PORT_FEATURES), "evtols": list(EVTOL_FEATURES) + list(STATE_EXTRA_FEATURES),
-            "extra": list(CLOCK_FEATURES)}
-
-
 def runner_config(cfg: TrainConfig) -> dict[str, Any]:
     """The ``train_cfg`` dict of rsl_rl's ``OnPolicyRunner``."""
-    from agents.gcn.vec_env import POLICY_GROUPS, STATE_GROUPS
-
     centralised_critic = cfg.mode == "multi_agent"
     model = {"hidden": cfg.model.hidden, "hidden_dims": list(cfg.model.hidden_dims)}
     return {
@@ -246,7 +233,7 @@ def scenario_configs(cfg: TrainConfig) -> list:
 
 
 def make_vec_env(cfg: TrainConfig):
-    from agents.gcn.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
+    from agents.gcn.train.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
 
     if cfg.mode == "multi_agent":
         return MultiAgentVecEnv(scenario_configs(cfg), num_envs=cfg.num_envs, device=cfg.device,

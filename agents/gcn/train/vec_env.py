@@ -49,7 +49,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from agents.gcn.padding import from_padded_action, pad_action_mask
-from agents.seeds import training_seed
+from agents.common.seeds import training_seed
 from marl_vertiport.config import EnvConfig, load_config
 from marl_vertiport.sim.core import EVTOL_FEATURES, SELF_FEATURES
 
@@ -57,8 +57,6 @@ from marl_vertiport.sim.core import EVTOL_FEATURES, SELF_FEATURES
 LOGGED_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
                   "mean_delay_min", "collisions", "separation_losses", "battery_depletions",
                   "stranded_air", "stranded_ground", "stranded", "service_min_lost")
-POLICY_GROUPS = ("port_nodes", "evtol_nodes", "self")
-STATE_GROUPS = ("state_port_nodes", "state_evtol_nodes", "state_clock")
 
 
 class _VertiportVecEnv(VecEnv):

@@ -1,0 +1,71 @@
+"""``python -m agents.bench`` (``make bench``): the speed of the simulator and of training,
+measured on the machine it runs on. Writes ``bench.json`` and a Markdown report.
+
+Measured:
+
+- env steps per second in one process, AEC and single-agent, random legal actions, nominal and
+  uncertain configs, the paper's 4 eVTOLs and the 16-eVTOL ``large`` layout: median and spread
+  over repeats;
+- in the same runs, the time spent inside the physics engine's calls (stepping, body updates,
+  position reads, contacts) and so the ratio of our own overhead to the engine's cost, over all
+  steps and over the steps in which bodies move;
+- the engine alone for the same motion: each run's pybullet calls recorded in a second run of
+  the same seed and replayed, timed, in bare pybullet;
+- a cProfile summary of the AEC env on the paper's layout;
+- vectorised throughput of K env copies with supersuit, in one process and over 2 processes;
+- actor inference latency at batch 1 and 64, training throughput (env samples per second) of
+  ``make train``'s config, and peak memory of an env and of a training run (separate processes).
+
+No number is asserted anywhere: the benchmark reports what it measures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+from pathlib import Path
+from typing import Any
+
+
+from agents.common.files import write_atomic
+from agents.bench.workloads import (
+    bench_api_floor, bench_env, bench_env_memory, bench_inference, bench_profile,
+    bench_training, bench_vector,
+)
+from agents.bench.report import report
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m agents.bench", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=20_000, help="env steps per timed run")
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs per measurement")
+    parser.add_argument("--configs", nargs="+", default=["paper", "paper_uncertain", "large"])
+    parser.add_argument("--vector-steps", type=int, default=400)
+    parser.add_argument("--copies", type=int, default=16)
+    parser.add_argument("--train-iterations", type=int, default=5)
+    parser.add_argument("--out", default="runs/bench", help="folder for bench.json")
+    parser.add_argument("--report", default=None, help="write the Markdown report here")
+    args = parser.parse_args(argv)
+    results: dict[str, Any] = {
+        "command": "python -m agents.bench " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores", "python": platform.python_version(),
+    }
+    print("benchmarking (each part in turn) ...", file=sys.stderr)
+    results["env"] = bench_env(args.steps, args.repeats, args.configs)
+    results["api_floor"] = bench_api_floor(args.steps, args.repeats)
+    results["profile"] = bench_profile(args.steps)
+    results["vector"] = bench_vector(args.vector_steps, args.copies)
+    results["inference"] = bench_inference()
+    results["training"] = bench_training(args.train_iterations)
+    results["env_peak_memory_mb"] = bench_env_memory()
+    write_atomic(Path(args.out) / "bench.json", json.dumps(results, indent=2))
+    text = report(results)
+    if args.report:
+        write_atomic(Path(args.report), text)
+    print(text)
+    return 0
+

@@ -1,0 +1,1 @@
+"""Plumbing shared by every layer of ``agents``: atomic file writes and the seed ranges."""

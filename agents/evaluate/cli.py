@@ -1,0 +1,142 @@
+"""Evaluate controllers on the paper's two cases: per-episode metrics, confidence intervals,
+the paper's case-study and action-distribution charts, and a Markdown report.
+
+Every agent plays the same held-out days (``EVAL_SEEDS[:N]``) of every case through the AEC
+API; an episode is fully determined by (agent, case, seed), so the numbers do not depend on how
+many worker processes run them.
+
+Usage::
+
+    python -m agents.evaluate --agents random fcfs heuristic --episodes 50 --out runs/eval
+    python -m agents.evaluate --agents random --episodes 3 --set schedule.episode_steps=60
+    python -m agents.evaluate --agents random fcfs heuristic --out docs/results \\
+        --report docs/results.md
+
+Outputs in ``--out``: ``episodes.csv``, ``summary.csv``, ``results.json``, ``case_study.png``,
+``action_distribution.png`` (and the ``--report`` file). Exit codes: 0 done, 1 a controller or
+the simulation failed mid-run (the episodes completed so far are written and ``results.json``
+says the run is incomplete), 2 bad input (nothing is run), 130 interrupted with Ctrl-C (partial
+results written as for 1).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import sys
+from pathlib import Path
+from typing import Iterable, Sequence
+
+
+from agents.common.seeds import parse_seed_range
+from agents.evaluate.settings import (
+    BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, DEFAULT_AGENTS, DEFAULT_CONFIGS, EvalSettings,
+    INTERRUPTED, InputError, load_suite, parse_overrides,
+)
+from agents.evaluate.episodes import close_envs
+from agents.evaluate.run import evaluate, validate
+from agents.evaluate.tables import format_table
+from agents.evaluate.report import write_outputs
+
+# ============================================================================ CLI
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.evaluate", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--agents", nargs="+", default=None, metavar="AGENT",
+                        help="controllers to evaluate: built-in names (random, fcfs, heuristic) "
+                             f"or import paths 'package.module:Class' (default: {' '.join(DEFAULT_AGENTS)})")
+    parser.add_argument("--configs", nargs="+", default=None, metavar="CONFIG",
+                        help="cases: config names in configs/env/ or YAML paths "
+                             f"(default: {' '.join(DEFAULT_CONFIGS)} = the paper's case 1 and case 2)")
+    parser.add_argument("--episodes", type=int, default=None, metavar="N",
+                        help="episodes (days) per agent and case, on seeds EVAL_SEEDS[:N] "
+                             "(default: 50, the paper's protocol)")
+    parser.add_argument("--suite", default=None, metavar="NAME",
+                        help="an evaluation suite in configs/suites/ (or a YAML path): its "
+                             "agents, cases and seeds, unless given here too")
+    parser.add_argument("--seeds", default=None, metavar="START:STOP",
+                        help="evaluate on seeds START .. STOP-1 instead (validation seeds "
+                             "800000-999999 for development, test seeds >= 1000000 for "
+                             "reported numbers; training seeds are refused)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
+                        help="worker processes; 1 runs in this process "
+                             "(default: the number of CPU cores, %(default)s)")
+    parser.add_argument("--out", type=Path, default=Path("runs/eval"), metavar="DIR",
+                        help="output folder, created if needed (default: %(default)s)")
+    parser.add_argument("--report", type=Path, default=None, metavar="PATH",
+                        help="also write a Markdown report there (e.g. docs/results.md)")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE",
+                        help="config override for every case, value parsed as YAML; repeatable "
+                             "(e.g. --set schedule.episode_steps=60)")
+    parser.add_argument("--bootstrap", type=int, default=BOOTSTRAP_RESAMPLES, metavar="N",
+                        help="bootstrap resamples for the confidence intervals "
+                             "(default: %(default)s)")
+    parser.add_argument("--bootstrap-seed", type=int, default=BOOTSTRAP_SEED, metavar="SEED",
+                        help="seed of the bootstrap's generator (default: %(default)s)")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="do not show the progress bar on stderr")
+    return parser
+
+
+def _unique(items: Iterable[str]) -> tuple[str, ...]:
+    return tuple(dict.fromkeys(items))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line entry point; returns the exit code (0 ok, 1 failed mid-run, 2 bad input)."""
+    args_list = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(args_list)
+    command = shlex.join(["python", "-m", "agents.evaluate", *args_list])
+    try:
+        agents, configs = args.agents or list(DEFAULT_AGENTS), args.configs or list(DEFAULT_CONFIGS)
+        if args.suite is not None:
+            suite = load_suite(args.suite)
+            agents, configs = args.agents or list(suite.agents), args.configs or list(suite.configs)
+            if args.seeds is None and args.episodes is None:
+                if suite.seeds:
+                    args.seeds = suite.seeds
+                else:
+                    args.episodes = suite.episodes
+        episodes, first_seed = 50 if args.episodes is None else args.episodes, None
+        if args.seeds is not None:
+            try:
+                seeds = parse_seed_range(args.seeds)
+            except ValueError as exc:
+                raise InputError(f"--seeds: {exc}") from None
+            if args.episodes is not None and args.episodes != len(seeds):
+                raise InputError(f"--episodes {args.episodes} and --seeds {args.seeds} "
+                                 f"({len(seeds)} seeds) disagree; give one of them")
+            episodes, first_seed = len(seeds), seeds.start
+        settings = EvalSettings(agents=_unique(agents), configs=_unique(configs),
+                                episodes=episodes, first_seed=first_seed,
+                                overrides=parse_overrides(args.overrides),
+                                bootstrap=args.bootstrap, bootstrap_seed=args.bootstrap_seed)
+        if args.workers < 1:
+            raise InputError(f"--workers must be >= 1, got {args.workers}")
+        names = validate(settings)
+    except InputError as exc:
+        close_envs()
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    evaluation = evaluate(settings, workers=args.workers, progress=not args.no_progress,
+                          action_names=names)
+    table = format_table(evaluation)
+    if table:
+        print(table)
+    written = write_outputs(evaluation, args.out, command, args.report)
+    print(f"\n{len(evaluation.records)} episodes in {evaluation.seconds:.1f} s; wrote "
+          + ", ".join(str(p) for p in written), file=sys.stderr)
+    if evaluation.error is not None:
+        print(f"error: {evaluation.error}", file=sys.stderr)
+        print(f"error: the run is incomplete: {len(evaluation.records)} of "
+              f"{len(settings.tasks())} episodes were completed and written to {args.out} "
+              "(results.json has \"complete\": false); no figures or report were written",
+              file=sys.stderr)
+        return 130 if evaluation.error == INTERRUPTED else 1
+    return 0
+

@@ -1,0 +1,66 @@
+"""One evaluation from settings to summary: check the input, run the episodes, summarise."""
+
+from __future__ import annotations
+
+import time
+
+
+from agents.common.seeds import EVAL_SEEDS
+from agents.controllers.registry import AgentSpecError, make_controller
+from agents.evaluate.settings import EvalSettings, Evaluation, InputError
+from agents.evaluate.episodes import cached_env, close_envs, run_episodes
+from agents.evaluate.stats import scalar_metrics, summarize
+
+def validate(settings: EvalSettings) -> dict[str, list[str]]:
+    """Check every agent and case before anything runs; return each case's action names.
+
+    Raises:
+        InputError: an unknown agent, an import path that does not load, a bad config or
+            override, or an episode count outside ``1 .. len(EVAL_SEEDS)``.
+    """
+    from marl_vertiport.config import ConfigError, load_config
+
+    if settings.first_seed is None and not 1 <= settings.episodes <= len(EVAL_SEEDS):
+        raise InputError(f"--episodes must be between 1 and {len(EVAL_SEEDS)}, "
+                         f"got {settings.episodes}")
+    if settings.bootstrap < 1:
+        raise InputError(f"--bootstrap must be >= 1, got {settings.bootstrap}")
+    if not settings.agents or not settings.configs:
+        raise InputError("at least one agent and one config are needed")
+    for spec in settings.agents:
+        try:
+            make_controller(spec)
+        except AgentSpecError as exc:
+            raise InputError(str(exc)) from None
+        except Exception as exc:  # the class loaded but could not be built
+            raise InputError(f"agent {spec!r}: building the controller failed: "
+                             f"{type(exc).__name__}: {exc}") from None
+    names: dict[str, list[str]] = {}
+    for config in settings.configs:
+        try:
+            load_config(config, **dict(settings.overrides))
+        except (ConfigError, OSError) as exc:
+            raise InputError(f"config {config!r}: {exc}") from None
+        sim = cached_env(config, settings.overrides).unwrapped.sim
+        names[config] = list(sim.actions.names(sim.layout))
+    return names
+
+
+
+
+def evaluate(settings: EvalSettings, workers: int = 1, progress: bool = True,
+             action_names: dict[str, list[str]] | None = None) -> Evaluation:
+    """Validate, run every episode and summarise. Raises :class:`InputError` on bad input."""
+    if action_names is None:
+        action_names = validate(settings)
+    start = time.perf_counter()
+    try:
+        records, error = run_episodes(settings, workers, progress)
+    finally:
+        close_envs()
+    metrics = scalar_metrics(records)
+    return Evaluation(settings, records, action_names, metrics,
+                      summarize(records, settings, metrics), error,
+                      seconds=time.perf_counter() - start)
+
+

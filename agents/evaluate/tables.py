@@ -1,0 +1,103 @@
+"""Text and data outputs: the console table, and the CSV and JSON files."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from typing import Any, Iterable, Sequence
+
+
+from agents.evaluate.metrics import METRIC_LABELS, TABLE_METRICS, case_label
+from agents.evaluate.settings import Evaluation
+
+
+def decimals(half_width: float, mean: float) -> int:
+    scale = half_width if half_width > 0 else abs(mean)
+    if not math.isfinite(scale) or scale < 1:
+        return 2
+    return 1 if scale < 10 else 0
+
+
+def format_pm(row: dict[str, Any]) -> str:
+    """``mean ± half-width of the CI``."""
+    half = (row["ci_high"] - row["ci_low"]) / 2.0
+    d = decimals(half, row["mean"])
+    return f"{row['mean']:.{d}f} ± {half:.{d}f}"
+
+
+def format_interval(row: dict[str, Any]) -> str:
+    """``mean [ci_low, ci_high]``."""
+    half = (row["ci_high"] - row["ci_low"]) / 2.0
+    d = decimals(half, row["mean"])
+    return f"{row['mean']:.{d}f} [{row['ci_low']:.{d}f}, {row['ci_high']:.{d}f}]"
+
+
+def format_table(evaluation: Evaluation) -> str:
+    """The console table: one block per case, agents as rows, mean ± 95 % CI half-width."""
+    metrics = [m for m in TABLE_METRICS if m in evaluation.metrics]
+    pct = round(100 * evaluation.settings.confidence)
+    blocks = []
+    for config in evaluation.settings.configs:
+        rows = [[agent] + [format_pm(evaluation.stat(agent, config, m)) for m in metrics]
+                for agent in evaluation.settings.agents
+                if evaluation.stat(agent, config, metrics[0]) is not None] if metrics else []
+        if not rows:
+            continue
+        n = max(evaluation.stat(r[0], config, metrics[0])["n"] for r in rows)
+        header = ["agent"] + [METRIC_LABELS.get(m, m) for m in metrics]
+        widths = [max(len(str(line[i])) for line in [header] + rows) for i in range(len(header))]
+        title = (f"{case_label(config)}: mean ± {pct} % CI half-width over {n} episode"
+                 f"{'s' if n != 1 else ''}")
+        lines = [title, "  ".join(h.ljust(w) if i == 0 else h.rjust(w)
+                                  for i, (h, w) in enumerate(zip(header, widths)))]
+        lines.append("  ".join("-" * w for w in widths))
+        for row in rows:
+            lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
+                                   for i, (c, w) in enumerate(zip(row, widths))))
+        blocks.append("\n".join(lines))
+    return "\n\n".join(blocks)
+
+
+# ============================================================================ files
+
+
+def _csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def episodes_csv(evaluation: Evaluation) -> str:
+    """One row per completed episode: agent, config, episode, seed, every scalar metric."""
+    header = ["agent", "config", "episode", "seed", *evaluation.metrics]
+    rows = ([r.task.agent, r.task.config, r.task.episode, r.task.seed,
+             *(r.metrics[m] for m in evaluation.metrics)] for r in evaluation.records)
+    return _csv_text(header, rows)
+
+
+def summary_csv(evaluation: Evaluation) -> str:
+    """One row per agent x case x metric: mean, std, ci_low, ci_high, n."""
+    header = ["agent", "config", "metric", "mean", "std", "ci_low", "ci_high", "n"]
+    return _csv_text(header, ([row[k] for k in header] for row in evaluation.summary))
+
+
+def results_json(evaluation: Evaluation, command: str) -> str:
+    """Everything: settings, per-episode metrics (with action counts), the summary."""
+    doc = {
+        "complete": evaluation.complete,
+        "error": evaluation.error,
+        "command": command,
+        "settings": evaluation.settings.to_json(),
+        "action_names": evaluation.action_names,
+        "metrics": evaluation.metrics,
+        "episodes": [{"agent": r.task.agent, "config": r.task.config, "episode": r.task.episode,
+                      "seed": r.task.seed, "metrics": r.metrics} for r in evaluation.records],
+        "summary": evaluation.summary,
+    }
+    return json.dumps(doc, indent=1, allow_nan=True) + "\n"
+
+

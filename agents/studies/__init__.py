@@ -1,0 +1,1 @@
+"""Studies behind the documentation's analyses (``python -m agents.studies.<name>``)."""

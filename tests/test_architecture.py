@@ -1,0 +1,126 @@
+"""The layers of docs/architecture.md, read from the import graph: every module imports only
+from its own layer or those below it, and no chain of imports leads back to where it started.
+
+Imports inside functions count too: a lazy import of a higher layer is still a dependency."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("marl_vertiport", "agents")
+
+#: (layer, module prefixes), lowest first; a module belongs to the layer of its longest prefix.
+LAYERS = (
+    (0, ("marl_vertiport.config", "marl_vertiport.sim")),            # simulator core
+    (1, ("marl_vertiport",)),                                         # env APIs
+    (2, ("agents.common", "agents.controllers", "agents.gcn")),       # controllers
+    (3, ("agents.evaluate",)),                                        # evaluation
+    (4, ("agents", "agents.gcn.train", "agents.train", "agents.render", "agents.bench",
+         "agents.studies")),                                          # training and tools
+)
+LAYER_NAMES = ("simulator core", "env APIs", "controllers", "evaluation", "training and tools")
+
+
+def layer_of(module: str) -> int:
+    best, layer = -1, None
+    for number, prefixes in LAYERS:
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best:
+                best, layer = len(prefix), number
+    assert layer is not None, f"{module} is in no layer of LAYERS"
+    return layer
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the project modules it imports (at the top or inside functions)."""
+    modules = {module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        targets: set[str] = set()
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                found = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:  # relative: resolve against this module's package
+                    anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join([*anchor, base] if base else anchor)
+                # ``from pkg import mod`` names a submodule when one exists.
+                found = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base
+                         for a in node.names]
+            else:
+                continue
+            targets.update(t for t in found if t.split(".")[0] in PACKAGES and t != name)
+        graph[name] = targets
+    return graph
+
+
+GRAPH = import_graph()
+
+
+def test_every_module_has_a_layer():
+    for module in GRAPH:
+        layer_of(module)
+
+
+def upward_imports(module: str, targets: set[str]) -> list[str]:
+    """Those of ``targets`` in a layer above ``module``'s."""
+    return sorted(t for t in targets if layer_of(t) > layer_of(module))
+
+
+@pytest.mark.parametrize("module", sorted(GRAPH))
+def test_imports_point_down(module):
+    mine = layer_of(module)
+    upward = upward_imports(module, GRAPH[module])
+    assert not upward, (f"{module} ({LAYER_NAMES[mine]}) imports from a layer above it: "
+                        + ", ".join(f"{t} ({LAYER_NAMES[layer_of(t)]})" for t in upward))
+
+
+def test_no_import_cycle():
+    """Depth-first search for a back edge; the message shows the cycle."""
+    state: dict[str, int] = {}  # 1 on the stack, 2 done
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(GRAPH.get(node, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                cycle = visit(nxt)
+                if cycle:
+                    return cycle
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for module in sorted(GRAPH):
+        if module not in state:
+            cycle = visit(module)
+            assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+def test_the_checker_flags_upward_imports_and_reads_lazy_ones():
+    """The checker itself: the former cycle's edge (inference importing training) is flagged,
+    a downward import is not, and an import inside a function is in the graph."""
+    assert upward_imports("agents.gcn.policy", {"agents.gcn.train.pipeline"}) == [
+        "agents.gcn.train.pipeline"]
+    assert upward_imports("agents.controllers.dispatcher", {"agents.evaluate.cli"}) == [
+        "agents.evaluate.cli"]
+    assert upward_imports("agents.evaluate.run", {"agents.controllers.registry",
+                                                   "marl_vertiport.sim.core"}) == []
+    # registry.py imports the GCN controller inside make_controller only.
+    assert "agents.gcn.policy" in GRAPH["agents.controllers.registry"]
