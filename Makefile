@@ -6,11 +6,14 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP    := $(VENV)/bin/pip
 STAMP  := $(VENV)/.installed
+CLI    := $(VENV)/bin/marl-vertiport
 CONFIG ?= paper
 
 .DEFAULT_GOAL := help
 AGENTS   ?= random fcfs heuristic
 EPISODES ?= 50
+CONFIGS  ?= paper paper_uncertain
+OUT      ?= runs/eval
 AGENT    ?= heuristic
 
 .PHONY: help venv test test-fast train evaluate results render bench env-demo clean
@@ -41,28 +44,28 @@ test-fast: $(STAMP)  ## the test suite without the full-episode tests
 TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>)
-	$(PY) -m agents.train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG))
+	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG))
 
-evaluate: $(STAMP)  ## evaluate AGENTS on both cases, EPISODES per case (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report
+evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report
 ifdef SUITE
-	$(PY) -m agents.evaluate --suite $(SUITE) --out runs/eval/$(notdir $(basename $(SUITE))) --report runs/eval/$(notdir $(basename $(SUITE)))/report.md
+	$(CLI) evaluate --suite $(SUITE) --out $(OUT)/$(notdir $(basename $(SUITE))) --report $(OUT)/$(notdir $(basename $(SUITE)))/report.md
 else
-	$(PY) -m agents.evaluate --agents $(AGENTS) --episodes $(EPISODES) --out runs/eval
+	$(CLI) evaluate --agents $(AGENTS) --configs $(CONFIGS) --episodes $(EPISODES) --out $(OUT)
 endif
 
 results: $(STAMP)  ## regenerate docs/results.md (50 days per uncertainty level), docs/results/transfer.md and docs/results/scaling.md (the suites)
-	$(PY) -m agents.evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md
-	$(PY) -m agents.evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md
-	$(PY) -m agents.evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md
+	$(CLI) evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md
+	$(CLI) evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md
+	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
-	$(PY) -m agents.render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif
+	$(CLI) render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif
 
 bench: $(STAMP)  ## measure env, physics, vector, inference and training speed (docs/performance.md)
-	$(PY) -m agents.bench --out runs/bench --report docs/performance.md
+	$(CLI) bench --out runs/bench --report docs/performance.md
 
 env-demo: $(STAMP)  ## run one day of the env with random legal actions and print its metrics
-	$(PY) -m marl_vertiport.cli demo --config $(CONFIG)
+	$(CLI) demo --config $(CONFIG)
 
 clean:  ## remove the virtual environment and caches
 	rm -rf $(VENV) .pytest_cache build *.egg-info

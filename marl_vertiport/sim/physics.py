@@ -23,26 +23,30 @@ import numpy as np
 
 
 def _import_pybullet_quietly():
-    """pybullet prints its build time from C on import; keep it out of stdout (tables, CSV
-    piped from the CLI)."""
+    """pybullet prints its build time from C on import (on stderr in the 3.2.7 wheel); keep it
+    out of the user's output: both standard streams point to ``os.devnull`` while it loads.
+    An import error is still raised as an exception."""
     import sys
 
     sys.stdout.flush()
+    sys.stderr.flush()
     try:
-        saved = os.dup(1)
-    except OSError:  # no usable stdout file descriptor
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no usable standard file descriptors
         import pybullet
 
         return pybullet
     try:
         with open(os.devnull, "w") as devnull:
             os.dup2(devnull.fileno(), 1)
+            os.dup2(devnull.fileno(), 2)
             import pybullet
 
-            _flush_c_stdio()  # the banner sits in C's stdout buffer until flushed
+            _flush_c_stdio()  # the banner may sit in C's stdio buffer until flushed
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        for fd, copy in zip((1, 2), saved):
+            os.dup2(copy, fd)
+            os.close(copy)
     return pybullet
 
 

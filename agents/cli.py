@@ -1,0 +1,65 @@
+"""``marl-vertiport``: one command for everything a user runs, once the package is installed.
+
+Commands (``marl-vertiport COMMAND --help`` for each one's options):
+
+    evaluate      evaluate controllers on cases or a suite (tables, CIs, figures, report)
+    train         train the GCN ATC from a train config (warm start, PPO, evaluation)
+    render        an animated GIF or MP4 of one episode of a controller
+    bench         the speed and memory benchmark (docs/performance.md)
+    capacity      the charger study: where the charging ports' minutes go, vehicles lost
+    demo          random legal actions for a few episodes, with steps per second
+    info          spaces, feature columns and action names of an env config
+    check-config  validate an env config and print it resolved
+
+Each command is also a module (``python -m agents.evaluate`` and so on); this entry point only
+dispatches to them, importing the one it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+#: Command -> (module whose ``main(argv)`` runs it, one-line help).
+COMMANDS = {
+    "evaluate": ("agents.evaluate.cli", "evaluate controllers on cases or a suite"),
+    "train": ("agents.gcn.train.pipeline", "train the GCN ATC from a train config"),
+    "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
+    "bench": ("agents.bench.cli", "the speed and memory benchmark"),
+    "capacity": ("agents.studies.capacity", "the charger study"),
+    "demo": ("marl_vertiport.cli", "random legal actions for a few episodes"),
+    "info": ("marl_vertiport.cli", "spaces, features and action names of a config"),
+    "check-config": ("marl_vertiport.cli", "validate an env config and print it resolved"),
+}
+#: Commands that belong to ``marl_vertiport.cli``, whose ``main`` takes the command name too.
+_ENV_COMMANDS = ("demo", "info", "check-config")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The top-level parser (for ``--help`` and errors); a command's own options are parsed by
+    its module."""
+    parser = argparse.ArgumentParser(prog="marl-vertiport", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (_, help_text) in COMMANDS.items():
+        sub.add_parser(name, help=help_text, add_help=False)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Dispatch ``argv`` (default: ``sys.argv[1:]``) to the command's module; its exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in COMMANDS:
+        build_parser().parse_args(argv[:1])  # prints the help, or the error, and exits
+    command, rest = argv[0], argv[1:]
+    module_name, _ = COMMANDS[command]
+    if command in _ENV_COMMANDS:
+        rest = [command, *rest]
+    code = importlib.import_module(module_name).main(rest)
+    return int(code or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
