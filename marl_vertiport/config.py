@@ -14,13 +14,16 @@ import dataclasses
 import types
 import typing
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-#: Folder with the shipped environment configs (``paper.yaml``, ``paper_uncertain.yaml``, ...).
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "env"
+#: Folder with the shipped environment configs (``paper.yaml``, ``paper_uncertain.yaml``, ...),
+#: inside the package so that an installed wheel finds them too (``configs/env/`` in the
+#: repository links here).
+CONFIG_DIR = Path(str(resources.files("marl_vertiport").joinpath("configs")))
 
 
 class ConfigError(ValueError):
