@@ -230,3 +230,21 @@ def test_custom_agent_example_runs(tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     assert "one day:" in out.stdout and "ChargeFirst" in out.stdout
     assert (root / "runs" / "eval_custom" / "results.json").exists()
+
+
+def test_the_controller_example_of_docs_controllers_md_plays_a_legal_day():
+    """The example a newcomer copies runs: its code block, one day of the paper's case 2."""
+    import re as _re
+    from pathlib import Path as _Path
+
+    from agents.controllers.base import run_aec_episode
+    from marl_vertiport import vertiport_v0
+
+    text = (_Path(__file__).resolve().parents[1] / "docs" / "controllers.md").read_text()
+    (code,) = [block for block in _re.findall(r"```python\n(.*?)```", text, _re.S)
+               if "class LandOnChargerFirst" in block]
+    namespace: dict = {}
+    exec(compile(code, "docs/controllers.md", "exec"), namespace)
+    metrics = run_aec_episode(vertiport_v0.env(config="paper_uncertain"),
+                              namespace["LandOnChargerFirst"](), seed=3)
+    assert metrics["steps"] == 1440

@@ -90,3 +90,9 @@ def test_base_key_extends_a_config(tmp_path):
     loop = write(tmp_path, f"base: {tmp_path / 'cfg.yaml'}\n")
     with pytest.raises(ConfigError, match="includes itself"):
         load_config(loop)
+
+
+def test_readme_lists_every_shipped_config():
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    for path in ALL_CONFIGS:
+        assert f"| `{path.stem}` |" in readme, f"README.md does not list configs/env/{path.name}"

@@ -8,6 +8,7 @@ import csv
 import importlib
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -323,3 +324,50 @@ def test_shipped_suites_name_real_configs_agents_and_test_seeds(path):
         assert callable(make_controller(agent).act)
     seeds = parse_seed_range(suite.seeds)
     assert seeds.start >= EVAL_SEED_BASE  # reported numbers come from test seeds
+
+
+def test_console_table_shows_the_bootstrap_interval_and_na_for_one_episode():
+    settings = ev.EvalSettings(agents=("a",), configs=("paper",), episodes=3)
+    row = {"agent": "a", "config": "paper", "metric": "total_reward", "mean": 100.0, "std": 9.0,
+           "ci_low": 80.0, "ci_high": 130.0, "n": 3}
+    text = ev.format_table(ev.Evaluation(settings, [], {}, ["total_reward"], [row]))
+    assert "100 [80, 130]" in text and "±" not in text  # asymmetric, as in the report
+    single = {**row, "ci_low": 100.0, "ci_high": 100.0, "n": 1}
+    text = ev.format_table(ev.Evaluation(settings, [], {}, ["total_reward"], [single]))
+    assert "100 [n/a]" in text and "one episode: no interval" in text
+
+
+def test_agent_help_names_every_builtin_and_the_other_forms(capsys):
+    from agents.controllers.registry import BUILTIN
+
+    with pytest.raises(SystemExit):
+        ev.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for name in [*BUILTIN, "gcn"]:
+        assert name in text
+    assert ".pt" in text and "package.module:Class" in text and "heuristic[holding=false]" in text
+
+
+def test_agent_spec_carries_constructor_arguments():
+    from agents.controllers.registry import AgentSpecError, make_controller, split_spec
+
+    assert split_spec("heuristic") == ("heuristic", {})
+    assert split_spec("heuristic[holding=false, priority_margin_pct=2.5]") == (
+        "heuristic", {"holding": False, "priority_margin_pct": 2.5})
+    assert split_spec("examples.custom_agent:ChargeFirst[]") == ("examples.custom_agent:ChargeFirst", {})
+    controller = make_controller("heuristic[holding=false,priority_margin_pct=2.5]")
+    assert controller.holding is False and controller.priority_margin_pct == 2.5
+    assert make_controller("heuristic").holding is True
+    for bad, words in [("heuristic[holding]", "not key=value"),
+                       ("heuristic[holding=false", "arguments look like"),
+                       ("heuristic[no_such_arg=1]", "no_such_arg"),
+                       ("heuristic[x=[1,]", "arguments look like")]:
+        with pytest.raises(AgentSpecError, match=re.escape(words)):
+            make_controller(bad)
+
+
+def test_agent_arguments_reach_the_worker_processes(tmp_path):
+    """The spec string is all a worker gets: two settings of one controller, side by side."""
+    assert _run(tmp_path, agents=("heuristic", "heuristic[holding=false]"), workers=2) == 0
+    agents = {r["agent"] for r in _rows(tmp_path / "episodes.csv")}
+    assert agents == {"heuristic", "heuristic[holding=false]"}

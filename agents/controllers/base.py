@@ -54,10 +54,29 @@ class Controller:
 
 @dataclass(frozen=True)
 class Observation:
-    """Named access to one AEC observation (see docs/environment.md, section 5).
+    """Named access to one AEC observation (see docs/environment.md, section 5, and
+    docs/controllers.md).
 
-    ``fleet(name)`` gives a column of the eVTOL graph for every vehicle, ``ports(name)`` a column
-    of the vertiport graph; ``me`` is the index of the observing (acting) eVTOL.
+    Reading the graphs: ``fleet(name)`` is a column of the eVTOL graph, one value per vehicle
+    ``(N,)``; ``mine(name)`` is that column's value for the acting eVTOL; ``ports(name)`` is a
+    column of the vertiport graph ``(P,)``; ``status`` and ``me`` (the acting eVTOL's row) are
+    shortcuts. Column names: ``EVTOL_FEATURES`` and ``PORT_FEATURES`` of
+    ``marl_vertiport.sim.core``.
+
+    Actions (``[stay, take off, node 0 .. node P-1, continue, avoid]``): ``stay``, ``takeoff``,
+    ``go_to(node)``, ``continue_``, ``avoid``; ``mask`` ``(4 + P,)`` says which are legal now,
+    ``legal()`` lists them, ``free_nodes(type)`` and ``reachable_nodes(type)`` the nodes of a type
+    that are free, or that the acting eVTOL may move to now.
+
+    Example::
+
+        obs = Observation(observation)
+        chargers = obs.reachable_nodes(CHARGING_PORT)
+        if obs.status == HOVERING and chargers.size:
+            return obs.go_to(int(chargers[0]))
+        if obs.mask[obs.takeoff] and obs.mine("minutes_to_schedule") <= 0:
+            return obs.takeoff
+        return obs.stay if obs.mask[obs.stay] else int(obs.legal()[0])
     """
 
     raw: dict
@@ -72,27 +91,35 @@ class Observation:
 
     @cached_property
     def mask(self) -> np.ndarray:
+        """The action mask, int8 ``(4 + P,)``; 1 = legal now."""
         return np.asarray(self.raw["action_mask"])
 
     @cached_property
     def me(self) -> int:
+        """Row of the acting eVTOL in the eVTOL graph (its ``is_self`` column)."""
         return int(np.argmax(self._evtols[:, _COL["is_self"]]))
 
     def fleet(self, name: str) -> np.ndarray:
+        """Column ``name`` of the eVTOL graph, ``(N,)``, e.g. ``fleet("battery_pct")``."""
         return self._evtols[:, _COL[name]]
 
     def mine(self, name: str) -> float:
+        """Column ``name`` of the acting eVTOL, e.g. ``mine("minutes_to_schedule")``."""
         return float(self._evtols[self.me, _COL[name]])
 
     def ports(self, name: str) -> np.ndarray:
+        """Column ``name`` of the vertiport graph, ``(P,)``: ``available``, ``type``, ``x_m``,
+        ``y_m``."""
         return self._ports[:, _PORT_COL[name]]
 
     @property
     def status(self) -> int:
+        """The acting eVTOL's status code (``ON_PORT`` .. ``OUT_OF_SERVICE``)."""
         return int(self.mine("status"))
 
     @property
     def n_nodes(self) -> int:
+        """Number of vertiport nodes ``P`` (ports, charging ports, hover spots)."""
         return self._ports.shape[0]
 
     # Action indices (paper's table I order; docs/environment.md, section 4).
@@ -105,10 +132,12 @@ class Observation:
 
     @property
     def continue_(self) -> int:
+        """Action that keeps a vehicle in transit on its way."""
         return 2 + self.n_nodes
 
     @property
     def avoid(self) -> int:
+        """Action that makes a vehicle in transit climb to an avoidance altitude."""
         return 3 + self.n_nodes
 
     def free_nodes(self, node_type: int) -> np.ndarray:
@@ -122,9 +151,11 @@ class Observation:
         return np.flatnonzero(moves & (self.ports("type") == node_type))
 
     def node_type(self, node: int) -> int:
+        """Type of vertiport node ``node`` (``NORMAL_PORT``, ``CHARGING_PORT``, ``HOVER_SPOT``)."""
         return int(self.ports("type")[int(node)])
 
     def legal(self) -> np.ndarray:
+        """Indices of the legal actions."""
         return np.flatnonzero(self.mask)
 
 

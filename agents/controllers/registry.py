@@ -1,11 +1,18 @@
 """Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``,
 ``rollout`` (the look-ahead planner, which reads the simulator), ``gcn``
-(the shipped trained policy), ``package.module:Class`` (a class built with no arguments, or a
-ready object), or the path of a training checkpoint (``.pt``)."""
+(the shipped trained policy), ``package.module:Class`` (a class, or a ready object), or the path
+of a training checkpoint (``.pt``).
+
+A built-in name or an import path may carry constructor arguments in brackets, values read as
+YAML: ``heuristic[holding=false]``, ``rollout[horizon=80,nominal=false]``,
+``examples.custom_agent:ChargeFirst[low_battery_pct=40]``. The whole spec (arguments included)
+names the controller in tables, so two settings of one controller can be compared side by side.
+Quote it in a shell (``'heuristic[holding=false]'``): brackets are glob characters."""
 
 from __future__ import annotations
 
 import importlib
+import re
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +30,45 @@ BUILTIN = {
 
 class AgentSpecError(ValueError):
     """An agent name or import path that does not give a controller."""
+
+
+def agent_help() -> str:
+    """What an agent spec may be, for the ``--help`` of every command that takes one."""
+    names = ", ".join([*BUILTIN, "gcn"])
+    return (f"a built-in name ({names}; gcn is the shipped checkpoint), the path of a training "
+            "checkpoint (.pt) or an import path 'package.module:Class'; constructor arguments "
+            "in brackets, e.g. 'heuristic[holding=false]'")
+
+
+_ARGS = re.compile(r"^(?P<target>[^\[\]]+)\[(?P<args>[^\[\]]*)\]$")
+
+
+def split_spec(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"heuristic[holding=false,priority_margin_pct=3]"`` ->
+    ``("heuristic", {"holding": False, "priority_margin_pct": 3})``; a spec without brackets
+    gives no arguments.
+
+    Raises:
+        AgentSpecError: unbalanced brackets, an argument that is not ``key=value``, or a value
+            that is not valid YAML.
+    """
+    import yaml
+
+    if "[" not in spec and "]" not in spec:
+        return spec, {}
+    match = _ARGS.match(spec)
+    if match is None:
+        raise AgentSpecError(f"agent {spec!r}: arguments look like 'name[key=value,key=value]'")
+    kwargs: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in match["args"].split(","))):
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip().isidentifier():
+            raise AgentSpecError(f"agent {spec!r}: argument {item!r} is not key=value")
+        try:
+            kwargs[key.strip()] = yaml.safe_load(raw)
+        except yaml.YAMLError as exc:
+            raise AgentSpecError(f"agent {spec!r}: argument {item!r}: not valid YAML ({exc})") from None
+    return match["target"].strip(), kwargs
 
 
 def _import(path: str, spec: str) -> Any:
@@ -50,22 +96,35 @@ def make_controller(spec: str) -> Any:
     Raises:
         AgentSpecError: unknown name, import failure, or an object without ``act``.
     """
-    if spec == "gcn" or spec.endswith(".pt"):
+    target_spec, kwargs = split_spec(spec)
+    if target_spec == "gcn" or target_spec.endswith(".pt"):
         from agents.gcn.policy import CheckpointError, GCNController
 
-        path = SHIPPED_CHECKPOINT if spec == "gcn" else Path(spec)
+        path = SHIPPED_CHECKPOINT if target_spec == "gcn" else Path(target_spec)
         try:
-            return GCNController(path)
+            return GCNController(path, **kwargs)
         except CheckpointError as exc:
             raise AgentSpecError(f"agent {spec!r}: {exc}") from exc
-    if spec in BUILTIN:
-        target = _import(BUILTIN[spec], spec)
-    elif ":" in spec:
-        target = _import(spec, spec)
+        except TypeError as exc:  # an argument GCNController does not take
+            raise AgentSpecError(f"agent {spec!r}: {exc}") from None
+    if target_spec in BUILTIN:
+        target = _import(BUILTIN[target_spec], spec)
+    elif ":" in target_spec:
+        target = _import(target_spec, spec)
     else:
-        raise AgentSpecError(f"unknown agent {spec!r}: use one of {sorted(BUILTIN) + ['gcn']}, an "
-                             "import path 'package.module:Class' or a checkpoint path ending in .pt")
-    controller = target() if isinstance(target, type) else target
+        raise AgentSpecError(f"unknown agent {spec!r}: use {agent_help()}")
+    if isinstance(target, type):
+        try:
+            controller = target(**kwargs)
+        except TypeError as exc:  # a keyword the class does not take
+            if kwargs:
+                raise AgentSpecError(f"agent {spec!r}: {exc}") from None
+            raise
+    elif kwargs:
+        raise AgentSpecError(f"agent {spec!r}: {target_spec!r} is an object, not a class; it "
+                             "takes no arguments")
+    else:
+        controller = target
     if not callable(getattr(controller, "act", None)):
         raise AgentSpecError(f"agent {spec!r}: {controller!r} has no act(observation) method")
     if not hasattr(controller, "name"):

@@ -30,6 +30,7 @@ from typing import Iterable, Sequence
 
 
 from agents.common.seeds import parse_seed_range
+from agents.controllers.registry import agent_help
 from agents.evaluate.settings import (
     BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, DEFAULT_AGENTS, DEFAULT_CONFIGS, EvalSettings,
     INTERRUPTED, InputError, load_suite, parse_overrides,
@@ -47,8 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m agents.evaluate", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--agents", nargs="+", default=None, metavar="AGENT",
-                        help="controllers to evaluate: built-in names (random, fcfs, heuristic) "
-                             f"or import paths 'package.module:Class' (default: {' '.join(DEFAULT_AGENTS)})")
+                        help=f"controllers to evaluate, each {agent_help()} "
+                             f"(default: {' '.join(DEFAULT_AGENTS)})")
     parser.add_argument("--configs", nargs="+", default=None, metavar="CONFIG",
                         help="cases: config names in configs/env/ or YAML paths "
                              f"(default: {' '.join(DEFAULT_CONFIGS)} = the paper's case 1 and case 2)")

@@ -20,27 +20,24 @@ def decimals(half_width: float, mean: float) -> int:
     return 1 if scale < 10 else 0
 
 
-def format_pm(row: dict[str, Any]) -> str:
-    """``mean ± half-width of the CI``."""
-    half = (row["ci_high"] - row["ci_low"]) / 2.0
-    d = decimals(half, row["mean"])
-    return f"{row['mean']:.{d}f} ± {half:.{d}f}"
-
-
 def format_interval(row: dict[str, Any]) -> str:
-    """``mean [ci_low, ci_high]``."""
+    """``mean [ci_low, ci_high]``: the percentile bootstrap's interval, which need not be
+    symmetric; ``mean [n/a]`` for a single episode, which has no interval."""
     half = (row["ci_high"] - row["ci_low"]) / 2.0
     d = decimals(half, row["mean"])
+    if row["n"] < 2:
+        return f"{row['mean']:.{d}f} [n/a]"
     return f"{row['mean']:.{d}f} [{row['ci_low']:.{d}f}, {row['ci_high']:.{d}f}]"
 
 
 def format_table(evaluation: Evaluation) -> str:
-    """The console table: one block per case, agents as rows, mean ± 95 % CI half-width."""
+    """The console table: one block per case, agents as rows, ``mean [95 % CI]`` as in the
+    report."""
     metrics = [m for m in TABLE_METRICS if m in evaluation.metrics]
     pct = round(100 * evaluation.settings.confidence)
     blocks = []
     for config in evaluation.settings.configs:
-        rows = [[agent] + [format_pm(evaluation.stat(agent, config, m)) for m in metrics]
+        rows = [[agent] + [format_interval(evaluation.stat(agent, config, m)) for m in metrics]
                 for agent in evaluation.settings.agents
                 if evaluation.stat(agent, config, metrics[0]) is not None] if metrics else []
         if not rows:
@@ -48,8 +45,8 @@ def format_table(evaluation: Evaluation) -> str:
         n = max(evaluation.stat(r[0], config, metrics[0])["n"] for r in rows)
         header = ["agent"] + [METRIC_LABELS.get(m, m) for m in metrics]
         widths = [max(len(str(line[i])) for line in [header] + rows) for i in range(len(header))]
-        title = (f"{case_label(config)}: mean ± {pct} % CI half-width over {n} episode"
-                 f"{'s' if n != 1 else ''}")
+        title = (f"{case_label(config)}: mean [{pct} % bootstrap CI] over {n} episode"
+                 f"{'s' if n != 1 else ''}" + (" (one episode: no interval)" if n == 1 else ""))
         lines = [title, "  ".join(h.ljust(w) if i == 0 else h.rjust(w)
                                   for i, (h, w) in enumerate(zip(header, widths)))]
         lines.append("  ".join("-" * w for w in widths))

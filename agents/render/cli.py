@@ -26,7 +26,7 @@ from pathlib import Path
 
 
 from agents.common.seeds import EVAL_SEEDS
-from agents.controllers.registry import BUILTIN, AgentSpecError, make_controller
+from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import VEHICLE_COLOURS
 from agents.render.camera import DEFAULT_PITCH_DEG, DEFAULT_YAW_DEG
@@ -86,8 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "instruction, and per eVTOL its battery, status, schedule and events.",
     )
     ap.add_argument("--agent", default="random",
-                    help=f"controller: one of {', '.join(sorted(BUILTIN))}, or an import path "
-                         "'package.module:Class' (default: %(default)s)")
+                    help=f"controller: {agent_help()} (default: %(default)s)")
     ap.add_argument("--config", default="paper",
                     help="env config: a name in configs/env/ (paper, paper_uncertain) or a YAML "
                          "path (default: %(default)s)")

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.controllers.base import _check_legal, _prepare
-from agents.controllers.registry import AgentSpecError, make_controller
+from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from agents.common.seeds import VALIDATION_SEED_BASE, parse_seed_range
 from marl_vertiport import ConfigError, vertiport_v0
 from marl_vertiport.sim.core import ON_CHARGER
@@ -108,7 +108,8 @@ def table(rows: list[dict[str, float]]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m agents.studies.capacity", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--agent", default="heuristic", help="controller (default: heuristic)")
+    parser.add_argument("--agent", default="heuristic",
+                        help=f"controller: {agent_help()} (default: heuristic)")
     parser.add_argument("--config", default="paper", help="env config (default: paper)")
     parser.add_argument("--fleet", type=int, nargs="+", default=[3, 4, 5],
                         help="fleet sizes to compare (default: 3 4 5)")
