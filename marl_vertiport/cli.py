@@ -49,7 +49,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from marl_vertiport.sim.core import EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES
+    from marl_vertiport.sim.schema import EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES
     from marl_vertiport.vertiport_v0 import raw_env
 
     env = raw_env(config=args.config)

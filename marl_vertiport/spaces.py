@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from marl_vertiport.sim.core import (
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import (
     EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES, STATE_PORT_FEATURES,
-    CLOCK_FEATURES, VertiportSim,
+    CLOCK_FEATURES,
 )
 
 

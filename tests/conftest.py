@@ -3,10 +3,10 @@ landing and conflicts rather than a fleet parked with empty batteries."""
 
 import numpy as np
 
-from marl_vertiport.sim.core import HOVERING, ON_CHARGER, ON_PORT, SELF_FEATURES
+from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT, SELF_FEATURES, ActionLayout
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT
 
-STAY, TAKEOFF = 0, 1
+STAY, TAKEOFF = ActionLayout.stay, ActionLayout.takeoff
 
 
 def busy_action(obs: dict, rng: np.random.Generator) -> int:
@@ -18,7 +18,7 @@ def busy_action(obs: dict, rng: np.random.Generator) -> int:
     ports = obs["observation"]["port_nodes"]
     status, battery = int(own[0]), own[1]
     minutes_to_schedule = own[SELF_FEATURES.index("minutes_to_schedule")]
-    node_actions = 2 + np.arange(len(ports))
+    node_actions = ActionLayout(len(ports)).node_action(np.arange(len(ports)))
     movable = mask[node_actions] == 1  # free, and within the battery under the energy check
     free_chargers = node_actions[movable & (ports[:, 1] == CHARGING_PORT)]
     free_ports = node_actions[movable & (ports[:, 1] != HOVER_SPOT)]

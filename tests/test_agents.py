@@ -13,7 +13,7 @@ from agents.controllers.registry import AgentSpecError, make_controller
 from agents.common.seeds import EVAL_SEEDS
 from marl_vertiport import vertiport_v0
 from marl_vertiport.gym_env import VertiportEnv
-from marl_vertiport.sim.core import EVTOL_FEATURES
+from marl_vertiport.sim.schema import EVTOL_FEATURES
 
 COL = {name: i for i, name in enumerate(EVTOL_FEATURES)}
 # Default layout: nodes 0-1 normal ports, 2 the charging port, 3-9 hover spots.

@@ -14,7 +14,7 @@ import pytest
 
 from conftest import seed0_sim
 
-from marl_vertiport.sim.core import HOVERING, ON_PORT, OUT_OF_SERVICE
+from marl_vertiport.sim.schema import HOVERING, ON_PORT, OUT_OF_SERVICE
 from marl_vertiport.sim.energy import leg_energy_pct
 
 STAY, TAKEOFF, CONTINUE = 0, 1, 12

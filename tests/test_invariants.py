@@ -5,7 +5,7 @@ import pytest
 
 from conftest import busy_action
 from marl_vertiport import IllegalActionError, vertiport_v0
-from marl_vertiport.sim.core import AWAY, OUT_OF_SERVICE
+from marl_vertiport.sim.schema import AWAY, OUT_OF_SERVICE
 
 
 def run_day(config: str, seed: int, policy: str, check=None, **overrides) -> list:
@@ -137,3 +137,22 @@ def test_masked_out_action_names_the_legal_set():
     illegal = int(np.flatnonzero(obs["action_mask"] == 0)[0])
     with pytest.raises(ValueError, match=r"masked out.*legal actions now"):
         env.step(illegal)
+
+
+def test_episode_summary_has_exactly_the_registered_metrics_in_order():
+    """One source for the metric list: the summary, the evaluation's labels and the training
+    logs all follow marl_vertiport.sim.metrics.METRICS."""
+    from agents.evaluate.metrics import DIRECTION, METRIC_LABELS
+    from agents.gcn.train.pipeline import CURVE_KEYS
+    from agents.gcn.train.vec_env import LOGGED_METRICS
+    from marl_vertiport import vertiport_v0
+    from marl_vertiport.sim.metrics import METRICS, TRAINING_METRICS
+
+    env = vertiport_v0.env(config="small", schedule__episode_steps=20)
+    env.reset(seed=0)
+    summary = env.unwrapped.sim.episode_metrics()
+    assert list(summary) == [*METRICS, "action_counts"]
+    assert list(METRIC_LABELS) == list(METRICS)
+    assert set(DIRECTION) <= set(METRICS) and all(v in (-1, 1) for v in DIRECTION.values())
+    assert LOGGED_METRICS == TRAINING_METRICS == CURVE_KEYS[-len(TRAINING_METRICS):]
+    assert {"total_reward", "stranded", "collisions"} <= set(TRAINING_METRICS)

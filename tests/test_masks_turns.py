@@ -14,9 +14,9 @@ import pytest
 
 from marl_vertiport import IllegalActionError
 from marl_vertiport.config import load_config
-from marl_vertiport.sim.core import (
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE, TAXIING,
-    VertiportSim,
 )
 
 STAY, TAKEOFF, CONTINUE, AVOID = 0, 1, 12, 13

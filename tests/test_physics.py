@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from marl_vertiport.config import load_config
-from marl_vertiport.sim.core import ARRIVING, HOVERING, TAXIING, VertiportSim
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import ARRIVING, HOVERING, TAXIING
 
 # Four hover spots on the axes, 10-12 m from the centre; two vehicles.
 SPOTS = [[-10.0, 0.0], [10.0, 0.0], [0.0, -10.0], [0.0, 10.0], [12.0, 0.0], [-12.0, 0.0]]

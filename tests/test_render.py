@@ -12,7 +12,7 @@ from agents import render
 from agents.controllers.random_agent import RandomController
 from marl_vertiport import vertiport_v0
 from marl_vertiport.render import render_frame
-from marl_vertiport.sim.core import AWAY
+from marl_vertiport.sim.schema import AWAY
 from marl_vertiport.sim.physics import VEHICLE_COLOURS
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -17,9 +17,8 @@ import pytest
 
 from conftest import seed0_sim
 
-from marl_vertiport.sim.core import (
-    HOVERING, NO_OPERATION, ON_PORT, PENDING_LANDING, TAXIING, VertiportSim,
-)
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import HOVERING, NO_OPERATION, ON_PORT, PENDING_LANDING, TAXIING
 
 W = (0.3, 0.3, 0.35, 0.1, 0.35)
 TAKEOFF, CONTINUE, AVOID, STAY = 1, 12, 13, 0

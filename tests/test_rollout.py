@@ -13,7 +13,7 @@ from agents.controllers.planner import RolloutPlanner
 from conftest import seed0_sim
 from marl_vertiport import vertiport_v0
 from marl_vertiport.gym_env import VertiportEnv
-from marl_vertiport.sim.core import OUT_OF_SERVICE
+from marl_vertiport.sim.schema import OUT_OF_SERVICE
 
 
 def test_planning_leaves_the_env_untouched_and_acts_legally():

@@ -16,9 +16,10 @@ import pytest
 from conftest import seed0_sim
 
 from marl_vertiport.config import load_config
-from marl_vertiport.sim.core import (
-    ARRIVING, AWAY, DEPARTING, DELAYED, EARLY, NO_OPERATION, ON_PORT,
-    ON_TIME, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, TAXIING, VertiportSim,
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import (
+    ARRIVING, AWAY, DEPARTING, DELAYED, EARLY, NO_OPERATION, ON_PORT, ON_TIME, OUT_OF_SERVICE,
+    PENDING_LANDING, PENDING_TAKEOFF, TAXIING,
 )
 
 STAY, TAKEOFF, CONTINUE = 0, 1, 12

@@ -14,9 +14,9 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from marl_vertiport.sim.core import (
+from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE,
-    PORT_FEATURES, TAXIING,
+    PORT_FEATURES, TAXIING, ActionLayout,
 )
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, NORMAL_PORT
 
@@ -61,7 +61,7 @@ class Observation:
     ``(N,)``; ``mine(name)`` is that column's value for the acting eVTOL; ``ports(name)`` is a
     column of the vertiport graph ``(P,)``; ``status`` and ``me`` (the acting eVTOL's row) are
     shortcuts. Column names: ``EVTOL_FEATURES`` and ``PORT_FEATURES`` of
-    ``marl_vertiport.sim.core``.
+    ``marl_vertiport.sim.schema``.
 
     Actions (``[stay, take off, node 0 .. node P-1, continue, avoid]``): ``stay``, ``takeoff``,
     ``go_to(node)``, ``continue_``, ``avoid``; ``mask`` ``(4 + P,)`` says which are legal now,
@@ -123,22 +123,27 @@ class Observation:
         return self._ports.shape[0]
 
     # Action indices (paper's table I order; docs/environment.md, section 4).
-    stay = 0
-    takeoff = 1
+    stay = ActionLayout.stay
+    takeoff = ActionLayout.takeoff
+
+    @cached_property
+    def actions(self) -> ActionLayout:
+        """The action layout of this observation's vertiport."""
+        return ActionLayout(self.n_nodes)
 
     def go_to(self, node: int) -> int:
         """Action that moves to / lands on vertiport node ``node``."""
-        return 2 + int(node)
+        return self.actions.node_action(int(node))
 
     @property
     def continue_(self) -> int:
         """Action that keeps a vehicle in transit on its way."""
-        return 2 + self.n_nodes
+        return self.actions.continue_
 
     @property
     def avoid(self) -> int:
         """Action that makes a vehicle in transit climb to an avoidance altitude."""
-        return 3 + self.n_nodes
+        return self.actions.avoid
 
     def free_nodes(self, node_type: int) -> np.ndarray:
         """Indices of the free nodes of one type (NORMAL_PORT, CHARGING_PORT, HOVER_SPOT)."""
@@ -147,7 +152,8 @@ class Observation:
     def reachable_nodes(self, node_type: int) -> np.ndarray:
         """Indices of the nodes of one type that the acting eVTOL may move to now: free, and
         within its battery when the env checks energy (``atc.energy_check``)."""
-        moves = self.mask[2:2 + self.n_nodes] == 1
+        first = self.actions.node_action(0)
+        moves = self.mask[first:first + self.n_nodes] == 1
         return np.flatnonzero(moves & (self.ports("type") == node_type))
 
     def node_type(self, node: int) -> int:

@@ -216,7 +216,7 @@ class DispatcherController(Controller):
         px, py = obs.ports("x_m"), obs.ports("y_m")
         to_charger_m = np.hypot(px[spots, None] - px[chargers][None],
                                 py[spots, None] - py[chargers][None]).min(axis=1)
-        allowed = (obs.mask[2 + spots] == 1) & (spots != int(obs.mine("node")))
+        allowed = (obs.mask[obs.go_to(0) + spots] == 1) & (spots != int(obs.mine("node")))
         ports_xy = np.column_stack([px, py])[types != HOVER_SPOT]
         here = np.array([obs.mine("x_m"), obs.mine("y_m")])
         for k in np.flatnonzero(allowed):  # keep clear of the ports' climbs and descents

@@ -28,7 +28,8 @@ import numpy as np
 
 from agents.controllers.base import Controller
 from agents.controllers.dispatcher import DispatcherController
-from marl_vertiport.sim.core import HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE, VertiportSim
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE
 from marl_vertiport.sim.layout import HOVER_SPOT
 from marl_vertiport.spaces import ObservationBuilder
 
@@ -116,7 +117,7 @@ class RolloutPlanner(Controller):
         if sim.battery[v] < self.min_takeoff_battery_pct:
             legal = legal[legal != sim.actions.takeoff]
         if sim.status[v] == HOVERING:
-            hover_moves = 2 + np.flatnonzero(sim.layout.node_type == HOVER_SPOT)
+            hover_moves = sim.actions.node_action(0) + np.flatnonzero(sim.layout.node_type == HOVER_SPOT)
             legal = legal[~np.isin(legal, hover_moves)]
             if sim.battery[v] <= self.min_hover_battery_pct and legal.size > 1:
                 legal = legal[legal != sim.actions.stay]  # low: land now, wherever is free

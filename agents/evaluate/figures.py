@@ -8,7 +8,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from agents.evaluate.metrics import FIGURE_METRICS, METRIC_LABELS, agent_label, case_label
+from agents.evaluate.metrics import (
+    FIGURE_METRICS, METRIC_LABELS, agent_label, axis_label, case_label,
+)
 from agents.evaluate.settings import ACTION_EPISODES, Evaluation
 from agents.evaluate.stats import action_shares
 
@@ -56,7 +58,7 @@ def case_study_figure(evaluation: Evaluation) -> bytes:
                    yerr=np.vstack([mean - low, high - mean]), capsize=4, color=colors[config],
                    error_kw={"elinewidth": 1.2, "ecolor": "#222222"}, label=case_label(config))
         ax.set_title(METRIC_LABELS.get(metric, metric).capitalize(), fontsize=12)
-        ax.set_ylabel(_unit_label(metric), fontsize=10)
+        ax.set_ylabel(axis_label(metric), fontsize=10)
         ax.set_xticks(x, [agent_label(a) for a in s.agents],
                       rotation=20 if max(len(agent_label(a)) for a in s.agents) > 9 else 0,
                       fontsize=10)
@@ -77,12 +79,6 @@ def case_study_figure(evaluation: Evaluation) -> bytes:
     data = _png(fig)
     plt.close(fig)
     return data
-
-
-def _unit_label(metric: str) -> str:
-    units = {"total_reward": "reward per day", "mean_battery_pct": "battery (%)",
-             "mean_delay_min": "delay per eVTOL (min)"}
-    return units.get(metric, "count per day")
 
 
 def action_distribution_figure(evaluation: Evaluation, episodes: int = ACTION_EPISODES) -> bytes:

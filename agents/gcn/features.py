@@ -3,7 +3,7 @@ column names of each (the feature schema a checkpoint stores and is checked agai
 
 from __future__ import annotations
 
-from marl_vertiport.sim.core import (
+from marl_vertiport.sim.schema import (
     CLOCK_FEATURES, EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATE_EXTRA_FEATURES,
     STATE_PORT_FEATURES,
 )

@@ -41,6 +41,7 @@ from torch import nn
 from torch_geometric.nn import DenseGCNConv
 
 from agents.gcn.distribution import MaskedCategorical
+from marl_vertiport.sim.schema import LEADING_ACTIONS, TRAILING_ACTIONS
 
 #: Scale of each numeric feature (divide by it), in physical units; names as in
 #: marl_vertiport.sim.core.
@@ -58,7 +59,7 @@ ONE_HOT = {"status": 8, "type": 3}
 INDEX_FEATURES = ("node", "occupant", "acting_vehicle")
 #: Number of actions that name no node: stay, take off (before the node actions), continue,
 #: avoid (after them).
-FIXED_ACTIONS = 4
+FIXED_ACTIONS = LEADING_ACTIONS + TRAILING_ACTIONS
 #: Node-action input beyond the two embeddings: node minus eVTOL position (x, y) and distance.
 _RELATIVE = 3
 
@@ -264,7 +265,7 @@ class GraphActor(_GraphModel):
     def logits(self, obs: TensorDict) -> torch.Tensor:
         """Unmasked logits ``(B, 4 + P)``: stay, take off, the P node actions, continue, avoid."""
         latent, port_nodes, port_x, own_emb = self.encode(obs)
-        fixed = self.mlp(latent)  # (B, 4)
+        fixed = self.mlp(latent)  # (B, FIXED_ACTIONS)
         ports = obs[self.obs_groups[0]].float()
         own = obs[self.obs_groups[2]].float()
         scale = FEATURE_SCALES["x_m"]
@@ -273,7 +274,7 @@ class GraphActor(_GraphModel):
         p = port_nodes.shape[1]
         pair = torch.cat([port_nodes, port_x, own_emb.unsqueeze(1).expand(-1, p, -1), rel, dist], dim=-1)
         nodes = self.node_scorer(pair).squeeze(-1)  # (B, P)
-        return torch.cat([fixed[:, :2], nodes, fixed[:, 2:]], dim=-1)
+        return torch.cat([fixed[:, :LEADING_ACTIONS], nodes, fixed[:, LEADING_ACTIONS:]], dim=-1)
 
     def action_probabilities(self, obs: TensorDict) -> torch.Tensor:
         """``(B, A)`` probabilities, 0 on illegal actions."""

@@ -1,4 +1,6 @@
-"""Padding graph observations of different vertiports to one size, and actions back.
+"""Observations to the graph models' inputs: the one converter from observation arrays to the
+tensors the actor and critic read (:func:`to_tensordict`), padding graph observations of
+different vertiports to one size, and actions back.
 
 Training across scenarios mixes vertiports with different numbers of nodes ``P`` and eVTOLs
 ``N`` in one batch (rsl_rl's rollout storage and the imitation data hold fixed-shape tensors).
@@ -14,9 +16,11 @@ node actions are masked. :func:`to_padded_action` and :func:`from_padded_action`
 from __future__ import annotations
 
 import numpy as np
+import torch
+from tensordict import TensorDict
 
-#: Actions before the node actions (stay, take off).
-_LEADING = 2
+from marl_vertiport.sim.schema import LEADING_ACTIONS
+
 
 
 def pad_rows(x: np.ndarray, size: int, axis: int) -> np.ndarray:
@@ -33,8 +37,8 @@ def pad_rows(x: np.ndarray, size: int, axis: int) -> np.ndarray:
 
 def pad_action_mask(mask: np.ndarray, n_nodes: int, max_nodes: int) -> np.ndarray:
     """A mask ``(..., 4 + P)`` as ``(..., 4 + P_max)``, padded node actions illegal."""
-    lead = mask[..., : _LEADING + n_nodes]
-    tail = mask[..., _LEADING + n_nodes:]
+    lead = mask[..., : LEADING_ACTIONS + n_nodes]
+    tail = mask[..., LEADING_ACTIONS + n_nodes:]
     pad = np.zeros(mask.shape[:-1] + (max_nodes - n_nodes,), dtype=mask.dtype)
     return np.concatenate([lead, pad, tail], axis=-1)
 
@@ -42,7 +46,7 @@ def pad_action_mask(mask: np.ndarray, n_nodes: int, max_nodes: int) -> np.ndarra
 def to_padded_action(action: np.ndarray | int, n_nodes: int, max_nodes: int):
     """An action of the ``P``-node space in the ``P_max``-node space."""
     a = np.asarray(action)
-    out = np.where(a >= _LEADING + n_nodes, a + (max_nodes - n_nodes), a)
+    out = np.where(a >= LEADING_ACTIONS + n_nodes, a + (max_nodes - n_nodes), a)
     return int(out) if out.ndim == 0 else out
 
 
@@ -50,9 +54,9 @@ def from_padded_action(action: np.ndarray | int, n_nodes: int, max_nodes: int):
     """An action of the ``P_max``-node space in the ``P``-node space (padded node actions are
     masked, so they never arrive here; one that does is refused)."""
     a = np.asarray(action)
-    if np.any((a >= _LEADING + n_nodes) & (a < _LEADING + max_nodes)):
+    if np.any((a >= LEADING_ACTIONS + n_nodes) & (a < LEADING_ACTIONS + max_nodes)):
         raise ValueError(f"action {a.tolist()} targets a padded node (the vertiport has {n_nodes})")
-    out = np.where(a >= _LEADING + max_nodes, a - (max_nodes - n_nodes), a)
+    out = np.where(a >= LEADING_ACTIONS + max_nodes, a - (max_nodes - n_nodes), a)
     return int(out) if out.ndim == 0 else out
 
 
@@ -72,3 +76,20 @@ def pad_observation(arrays: dict[str, np.ndarray], max_nodes: int, max_evtols: i
     out["port_valid"] = np.broadcast_to(np.arange(max_nodes) < p, lead + (max_nodes,)).copy()
     out["evtol_valid"] = np.broadcast_to(np.arange(max_evtols) < n, lead + (max_evtols,)).copy()
     return out
+
+
+#: Groups that are masks (bool tensors); every other group is features (float32).
+BOOL_GROUPS = ("action_mask", "port_valid", "evtol_valid")
+
+
+def to_tensordict(arrays: dict[str, np.ndarray], batch_size: int, device: str | torch.device = "cpu"
+                  ) -> TensorDict:
+    """Observation groups with a leading batch dimension (``port_nodes (B, P, Fp)``,
+    ``evtol_nodes (B, N, Fe)``, ``self (B, Fs)``, ``action_mask (B, A)``, and any state or
+    ``*_valid`` groups) as the models' input: features as float32, masks as bool, copied (the
+    arrays may be reused)."""
+    data = {}
+    for key, value in arrays.items():
+        tensor = torch.from_numpy(np.array(value, copy=True))
+        data[key] = tensor.bool() if key in BOOL_GROUPS else tensor.float()
+    return TensorDict(data, batch_size=[batch_size], device=device)

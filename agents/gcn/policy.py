@@ -17,6 +17,9 @@ import torch
 from tensordict import TensorDict
 
 from agents.controllers.base import Controller
+from agents.gcn.features import POLICY_GROUPS
+from agents.gcn.padding import to_tensordict
+from marl_vertiport.sim.schema import ActionLayout
 
 
 class CheckpointError(ValueError):
@@ -80,7 +83,7 @@ class GCNController(Controller):
         probe.close()
         self.feature_counts = {"port_nodes": len(schema["ports"]), "evtol_nodes": len(schema["evtols"]),
                                "self": len(schema["extra"])}
-        groups = {"actor": ["port_nodes", "evtol_nodes", "self"]}
+        groups = {"actor": list(POLICY_GROUPS)}
         self.actor = GraphActor(example, groups, "actor", 1, feature_names("observation"),
                                 hidden=model["hidden"], hidden_dims=model["hidden_dims"])
         try:
@@ -95,11 +98,11 @@ class GCNController(Controller):
 
     @staticmethod
     def _tensors(observation: dict) -> TensorDict:
+        """One AEC observation as a batch of one (:func:`agents.gcn.padding.to_tensordict`)."""
         inner = observation["observation"]
-        data = {k: torch.as_tensor(np.asarray(inner[k]), dtype=torch.float32).unsqueeze(0)
-                for k in ("port_nodes", "evtol_nodes", "self")}
-        data["action_mask"] = torch.as_tensor(np.asarray(observation["action_mask"])).bool().unsqueeze(0)
-        return TensorDict(data, batch_size=[1])
+        arrays = {k: np.asarray(inner[k])[None] for k in POLICY_GROUPS}
+        arrays["action_mask"] = np.asarray(observation["action_mask"])[None]
+        return to_tensordict(arrays, 1)
 
     def reset(self, seed: int | None = None) -> None:
         if seed is not None:
@@ -113,9 +116,9 @@ class GCNController(Controller):
                     f"checkpoint {self.path} reads {key} with {count} feature columns, but the "
                     f"observation has {obs[key].shape[-1]}: another observation schema")
         n_nodes = obs["port_nodes"].shape[1]
-        if obs["action_mask"].shape[-1] != 4 + n_nodes:
+        if obs["action_mask"].shape[-1] != ActionLayout(n_nodes).n:
             raise CheckpointError(f"action mask of width {obs['action_mask'].shape[-1]} for "
-                                  f"{n_nodes} vertiport nodes: expected {4 + n_nodes}")
+                                  f"{n_nodes} vertiport nodes: expected {ActionLayout(n_nodes).n}")
         with torch.no_grad():
             if self.deterministic:
                 return int(self.actor(obs).item())

@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from marl_vertiport.sim.core import (
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE, PENDING_LANDING,
-    PENDING_TAKEOFF, TAXIING, VertiportSim,
+    PENDING_TAKEOFF, TAXIING,
 )
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT
 from marl_vertiport.sim.physics import VEHICLE_COLOURS

@@ -26,7 +26,7 @@ from agents.controllers.base import _check_legal, _prepare
 from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from agents.common.seeds import VALIDATION_SEED_BASE, parse_seed_range
 from marl_vertiport import ConfigError, vertiport_v0
-from marl_vertiport.sim.core import ON_CHARGER
+from marl_vertiport.sim.schema import ON_CHARGER
 
 
 @dataclass

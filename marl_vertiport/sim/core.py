@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -25,12 +24,14 @@ from marl_vertiport.sim.geometry import (
     cpa, segment_distance, swept_min_distance, swept_min_distance_pair,
 )
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
+from marl_vertiport.sim.metrics import EpisodeMetrics
+from marl_vertiport.sim.schema import (
+    ARRIVING, AWAY, DELAYED, DEPARTING, EARLY, EVTOL_FEATURES, HOVERING, NO_OPERATION, ON_CHARGER,
+    ON_PORT, ON_TIME, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, SELF_FEATURES,
+    STATE_EXTRA_FEATURES, STATE_PORT_FEATURES, STATUS_NAMES, TAXIING, ActionLayout, _IS_SELF,
+)
 from marl_vertiport.sim.physics import FlightPhysics
 
-# Vehicle status codes (feature ``status`` of the eVTOL graph).
-ON_PORT, ON_CHARGER, HOVERING, TAXIING, DEPARTING, AWAY, ARRIVING, OUT_OF_SERVICE = range(8)
-STATUS_NAMES = ("on_port", "on_charger", "hovering", "taxiing", "departing", "away", "arriving",
-                "out_of_service")
 # Per status code (indexed by a Python int on hot paths).
 _AIRBORNE = (False, False, True, True, True, True, True, False)
 _IN_TRANSIT_INSIDE = (False, False, False, True, True, False, True, False)
@@ -39,110 +40,8 @@ _DEFLECTION_TOL_M = 1e-4  # engine position vs commanded motion; integration err
 _SCALAR_PAIRS_MAX = 24  # above this many vehicle pairs the array version of a check is cheaper
 _EXP_MEMO_MAX = 4096  # bound on the memo of exp(-delay) (a config with fractional minutes)
 
-# Schedule status codes (feature ``schedule_status``).
-EARLY, ON_TIME, DELAYED = -1, 0, 1
-# Pending operation of a vehicle.
-NO_OPERATION, PENDING_TAKEOFF, PENDING_LANDING = 0, 1, 2
-
-#: Columns of the eVTOL graph's node features in observations.
-EVTOL_FEATURES = ("status", "battery_pct", "schedule_status", "x_m", "y_m", "z_m", "vx_mps",
-                  "vy_mps", "minutes_to_schedule", "delay_min", "conflict", "node", "is_self")
-#: Columns of the acting eVTOL's own feature vector (``self`` in observations).
-SELF_FEATURES = EVTOL_FEATURES[:11]
-_IS_SELF = EVTOL_FEATURES.index("is_self")
-#: Columns of the vertiport graph's node features (paper: availability, type, location).
-PORT_FEATURES = ("available", "type", "x_m", "y_m")
-#: Extra columns of the eVTOL nodes in the global state, after EVTOL_FEATURES.
-STATE_EXTRA_FEATURES = ("vz_mps", "destination_x_m", "destination_y_m", "avoid_layer")
-#: Extra column of the port nodes in the global state: index of the occupying/reserving vehicle.
-STATE_PORT_FEATURES = PORT_FEATURES + ("occupant",)
-#: Entries of the ``clock`` array of the global state.
-CLOCK_FEATURES = ("minute", "acting_vehicle", "steps_left")
-
-
-@dataclass
-class ActionLayout:
-    """Indices of the discrete actions, derived from the layout (paper's table I order)."""
-
-    n_nodes: int
-    stay: int = 0
-    takeoff: int = 1
-    continue_: int = field(init=False)
-    avoid: int = field(init=False)
-
-    def __post_init__(self) -> None:
-        self.continue_ = 2 + self.n_nodes
-        self.avoid = 3 + self.n_nodes
-
-    @property
-    def n(self) -> int:
-        return 4 + self.n_nodes
-
-    def node_action(self, node: int) -> int:
-        """Action that moves to / lands on vertiport node ``node``."""
-        return 2 + node
-
-    def names(self, layout: Layout) -> list[str]:
-        out = ["stay", "takeoff"]
-        for k in range(layout.n_normal):
-            out.append(f"normal_port_{k}")
-        for k in range(layout.n_charging):
-            out.append(f"charging_port_{k}")
-        for k in range(layout.n_hover):
-            out.append(f"hover_spot_{k}")
-        return out + ["continue", "avoid_collision"]
-
-
 class IllegalActionError(ValueError):
     """An action that is out of range, of the wrong type, or masked out."""
-
-
-@dataclass
-class EpisodeMetrics:
-    """Running totals of an episode; :meth:`summary` gives the paper's metrics and ours."""
-
-    steps: int = 0
-    total_reward: float = 0.0
-    battery_sum: float = 0.0
-    good_takeoffs: int = 0
-    takeoffs: int = 0
-    failed_takeoffs: int = 0
-    good_landings: int = 0
-    landings: int = 0
-    completed_trips: int = 0
-    collisions: int = 0
-    avoided_conflicts: int = 0
-    separation_losses: int = 0
-    contacts: int = 0
-    battery_depletions: int = 0
-    stranded_air: int = 0
-    stranded_ground: int = 0
-    action_counts: np.ndarray | None = None
-
-    def summary(self, delay_min_per_vehicle: np.ndarray, service_min_lost: float = 0.0) -> dict[str, Any]:
-        """The metrics; ``service_min_lost`` is the minutes from each lost vehicle's loss to now."""
-        return {
-            "steps": self.steps,
-            "total_reward": float(self.total_reward),
-            "mean_battery_pct": self.battery_sum / max(self.steps, 1),
-            "good_takeoffs": self.good_takeoffs,
-            "good_landings": self.good_landings,
-            "takeoffs": self.takeoffs,
-            "failed_takeoffs": self.failed_takeoffs,
-            "landings": self.landings,
-            "mean_delay_min": float(delay_min_per_vehicle.mean()),
-            "collisions": self.collisions,
-            "avoided_conflicts": self.avoided_conflicts,
-            "separation_losses": self.separation_losses,
-            "contacts": self.contacts,
-            "battery_depletions": self.battery_depletions,
-            "stranded_air": self.stranded_air,
-            "stranded_ground": self.stranded_ground,
-            "stranded": self.stranded_air + self.stranded_ground,
-            "service_min_lost": float(service_min_lost),
-            "completed_trips": self.completed_trips,
-            "action_counts": self.action_counts.tolist() if self.action_counts is not None else [],
-        }
 
 
 class VertiportSim:

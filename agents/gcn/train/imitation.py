@@ -36,11 +36,14 @@ import torch
 from tensordict import TensorDict
 
 from agents.common.files import write_atomic
+from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
+from agents.gcn.padding import to_tensordict as padded_tensordict
 from agents.common.seeds import WARM_START_SEED_BASE, training_seed
+from marl_vertiport.sim.metrics import TRAINING_METRICS
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).
-ACTOR_GROUPS = ("port_nodes", "evtol_nodes", "self", "action_mask")
+ACTOR_GROUPS = (*POLICY_GROUPS, "action_mask")
 TEACHERS = ("rollout", "heuristic")
 
 
@@ -173,13 +176,10 @@ def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag:
 
 
 def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
-    """Collected arrays as the actor's observation groups (mask as bool), rows first."""
-    out = {k: torch.from_numpy(np.ascontiguousarray(data[k])).float() for k in ACTOR_GROUPS[:3]}
-    out["action_mask"] = torch.from_numpy(data["action_mask"]).bool()
-    for key in ("port_valid", "evtol_valid"):
-        if key in data:
-            out[key] = torch.from_numpy(np.ascontiguousarray(data[key])).bool()
-    return TensorDict(out, batch_size=[len(data["label"])])
+    """Collected arrays as the actor's observation groups, rows first (the shared converter,
+    :func:`agents.gcn.padding.to_tensordict`)."""
+    groups = [*ACTOR_GROUPS, *(k for k in ("port_valid", "evtol_valid") if k in data)]
+    return padded_tensordict({k: data[k] for k in groups}, len(data["label"]))
 
 
 def label_weights(regret: np.ndarray, cap: float) -> np.ndarray:
@@ -272,9 +272,7 @@ def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: 
 
 
 #: Day metrics averaged per warm-start round for the learning curve (``warmstart.csv``).
-ROUND_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                 "mean_delay_min", "collisions", "separation_losses", "battery_depletions",
-                 "stranded_air", "stranded_ground", "stranded", "service_min_lost")
+ROUND_METRICS = TRAINING_METRICS
 
 
 def day_score(metrics: dict[str, Any], lost_vehicle_penalty: float) -> float:

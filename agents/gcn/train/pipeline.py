@@ -35,6 +35,7 @@ from agents.common.files import write_atomic
 from agents.gcn.train.imitation import ROUND_METRICS, TEACHERS, warm_start
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
+from marl_vertiport.sim.metrics import TRAINING_METRICS
 from marl_vertiport.config import (
     ConfigError, build_dataclass, load_config, load_yaml_dataclass, to_dict,
 )
@@ -48,10 +49,7 @@ WARM_CURVE_KEYS = ("round", "driver", "env_steps", *ROUND_METRICS, "cross_entrop
                    "kept_round")
 WARM_STATE = "warmstart_state.pt"
 CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_loss", "surrogate_loss",
-              "entropy", "learning_rate", "total_reward", "mean_battery_pct", "good_takeoffs",
-              "good_landings", "mean_delay_min", "collisions", "separation_losses",
-              "battery_depletions", "stranded_air", "stranded_ground", "stranded",
-              "service_min_lost")
+              "entropy", "learning_rate", *TRAINING_METRICS)
 
 
 # ------------------------------------------------------------------------------ config schema

@@ -48,15 +48,14 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from agents.gcn.padding import from_padded_action, pad_action_mask
+from agents.gcn.padding import from_padded_action, pad_action_mask, to_tensordict
 from agents.common.seeds import training_seed
 from marl_vertiport.config import EnvConfig, load_config
-from marl_vertiport.sim.core import EVTOL_FEATURES, SELF_FEATURES
+from marl_vertiport.sim.schema import EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, ActionLayout
+from marl_vertiport.sim.metrics import TRAINING_METRICS
 
 #: Episode metrics logged by rsl_rl (averaged over the episodes that end in an iteration).
-LOGGED_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                  "mean_delay_min", "collisions", "separation_losses", "battery_depletions",
-                  "stranded_air", "stranded_ground", "stranded", "service_min_lost")
+LOGGED_METRICS = TRAINING_METRICS
 
 
 class _VertiportVecEnv(VecEnv):
@@ -103,9 +102,7 @@ class _VertiportVecEnv(VecEnv):
         return {key: torch.tensor([float(m[key]) for m in finished]) for key in LOGGED_METRICS}
 
     def _tensors(self, arrays: dict[str, np.ndarray]) -> TensorDict:
-        data = {k: torch.from_numpy(v.copy()).to(self.device) for k, v in arrays.items()}
-        data["action_mask"] = data["action_mask"].bool()
-        return TensorDict(data, batch_size=[self.num_envs], device=self.device)
+        return to_tensordict(arrays, self.num_envs, self.device)
 
 
 class MultiAgentVecEnv(_VertiportVecEnv):
@@ -135,13 +132,13 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         self.padded = len({(sim.n, sim.layout.n_nodes) for sim in sims}) > 1
         n, p = max_n, max(sim.layout.n_nodes for sim in sims)
         self.max_nodes, self.max_evtols = p, n
-        a = 4 + p
+        a = ActionLayout(p).n
         k = self.num_copies
         st = self.envs[0].state()
         self._buf = {
-            "port_nodes": np.zeros((k, n, p, 4), np.float32),
-            "evtol_nodes": np.zeros((k, n, n, 13), np.float32),
-            "self": np.zeros((k, n, 11), np.float32),
+            "port_nodes": np.zeros((k, n, p, len(PORT_FEATURES)), np.float32),
+            "evtol_nodes": np.zeros((k, n, n, len(EVTOL_FEATURES)), np.float32),
+            "self": np.zeros((k, n, len(SELF_FEATURES)), np.float32),
             "action_mask": np.zeros((k, n, a), np.int8),
             "state_port_nodes": np.zeros((k, n, p, st["port_nodes"].shape[-1]), np.float32),
             "state_evtol_nodes": np.zeros((k, n, n, st["evtol_nodes"].shape[-1]), np.float32),
