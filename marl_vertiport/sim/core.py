@@ -1,13 +1,28 @@
-"""The vertiport simulator: vehicles, schedules, battery, reward, safety and uncertainty.
+"""The vertiport simulator: the state of the day and the order of a step.
 
 This module imports no RL or deep-learning library. The PettingZoo AEC env and the Gymnasium
 env are thin translations of :class:`VertiportSim`; both call :meth:`VertiportSim.step` with
 the action of the vehicle whose turn it is.
 
-Per decision step (``schedule.minutes_per_step`` of schedule time, one minute by default): the acting vehicle's action is checked and applied,
-every vehicle moves for ``flight_seconds_per_step`` of flight (pybullet inside the airspace, a
-kinematic model outside it), batteries and schedules advance, and the paper's reward of the
-acting vehicle is returned.
+A step (``schedule.minutes_per_step`` of schedule time, one minute by default) follows the
+paper's section II:
+
+1. the ATC's instruction to the acting eVTOL is checked against its mask and applied (a
+   misread may replace it, :mod:`~marl_vertiport.sim.uncertainty`); a take-off or landing
+   scores its term of the reward and completes the pending operation
+   (:mod:`~marl_vertiport.sim.reward`, :mod:`~marl_vertiport.sim.schedule`);
+2. every vehicle moves for ``flight_seconds_per_step`` of flight, pybullet inside the airspace
+   and a kinematic model outside it (:mod:`~marl_vertiport.sim.physics`), with wind gusts;
+3. separation flown and contacts are measured (:mod:`~marl_vertiport.sim.safety`), arrivals
+   and touchdowns processed, new flight plans drawn;
+4. batteries drain or charge (:mod:`~marl_vertiport.sim.battery`), with charger failures;
+   vehicles depleted in the air or stranded on the ground are counted as lost;
+5. the clock advances, delays are updated, and the acting eVTOL's reward (eq. 2) is summed;
+6. the conflict probe runs for the next state, the next eVTOL in round-robin order gets the
+   turn, and observation noise is drawn.
+
+The vocabulary (statuses, features, actions) is :mod:`~marl_vertiport.sim.schema`; the metrics
+are :mod:`~marl_vertiport.sim.metrics`.
 """
 
 from __future__ import annotations
@@ -20,25 +35,25 @@ import numpy as np
 
 from marl_vertiport.config import EnvConfig
 from marl_vertiport.sim.energy import FlightEnergy, local_route
-from marl_vertiport.sim.geometry import (
-    cpa, segment_distance, swept_min_distance, swept_min_distance_pair,
-)
+from marl_vertiport.sim.battery import BatteryModel
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
 from marl_vertiport.sim.metrics import EpisodeMetrics
 from marl_vertiport.sim.schema import (
-    ARRIVING, AWAY, DELAYED, DEPARTING, EARLY, EVTOL_FEATURES, HOVERING, NO_OPERATION, ON_CHARGER,
-    ON_PORT, ON_TIME, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, SELF_FEATURES,
+    ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, NO_OPERATION, ON_CHARGER,
+    ON_PORT, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, SELF_FEATURES,
     STATE_EXTRA_FEATURES, STATE_PORT_FEATURES, STATUS_NAMES, TAXIING, ActionLayout, _IS_SELF,
 )
 from marl_vertiport.sim.physics import FlightPhysics
+from marl_vertiport.sim.reward import RewardModel
+from marl_vertiport.sim.safety import conflicting_pairs, planned_velocity, swept_distances_m
+from marl_vertiport.sim.schedule import FlightSchedule
+from marl_vertiport.sim.uncertainty import Uncertainty
 
 # Per status code (indexed by a Python int on hot paths).
 _AIRBORNE = (False, False, True, True, True, True, True, False)
 _IN_TRANSIT_INSIDE = (False, False, False, True, True, False, True, False)
 
 _DEFLECTION_TOL_M = 1e-4  # engine position vs commanded motion; integration error is ~1e-12
-_SCALAR_PAIRS_MAX = 24  # above this many vehicle pairs the array version of a check is cheaper
-_EXP_MEMO_MAX = 4096  # bound on the memo of exp(-delay) (a config with fractional minutes)
 
 class IllegalActionError(ValueError):
     """An action that is out of range, of the wrong type, or masked out."""
@@ -67,12 +82,10 @@ class VertiportSim:
         self.park_z_m = fl.vehicle_height_m / 2.0
         # Largest centre distance at which two boxes can touch (corner to corner), plus slack.
         self._touch_m = float(np.sqrt(2 * fl.vehicle_size_m ** 2 + fl.vehicle_height_m ** 2)) + 0.05
-        bat = config.battery
-        # Battery change per step by status, before the distance flown is known.
-        rate = [-bat.hover_drain_pct if airborne else 0.0 for airborne in _AIRBORNE]
-        rate[ON_PORT] = -bat.ground_idle_drain_pct
-        rate[ON_CHARGER] = bat.charge_pct
-        self._battery_rate = tuple(rate)
+        self.battery_model = BatteryModel(config.battery, _AIRBORNE, ON_PORT, ON_CHARGER)
+        self.reward_model = RewardModel(config.reward, config.schedule)
+        self.schedule = FlightSchedule(config.schedule)
+        self.uncertainty = Uncertainty(config.uncertainty)
         lay = self.layout
         self._port_static = np.zeros((lay.n_nodes, 4), dtype=np.float32)
         self._port_static[:, 1] = lay.node_type
@@ -80,16 +93,12 @@ class VertiportSim:
         self._node_pos = np.column_stack([lay.node_xy_m, lay.node_z_m])
         self._is_port = lay.node_type != HOVER_SPOT
         self._charging_nodes = np.flatnonzero(lay.node_type == CHARGING_PORT)
-        un = config.uncertainty
-        self._noisy_obs = un.position_noise_std_m > 0 or un.position_noise_mean_m != 0
+        self._charging_node_list = self._charging_nodes.tolist()
         self._agent_names = tuple(f"evtol_{i}" for i in range(self.n))
         self._fixed_masks = self._status_masks()
         self.energy = FlightEnergy(config, self.layout)
         # Battery a hovering vehicle spends until its next turn (at most a full round).
         self._hold_pct = config.battery.hover_drain_pct * self.n
-        # exp(-delay) by delay: delays take few distinct values (whole minutes in the shipped
-        # configs), and a memo is cheaper than numpy's exp on a scalar.
-        self._exp_neg_delay: dict[float, float] = {}
         # Everything set so far is fixed for the env's life; what follows is episode state,
         # which snapshot() copies.
         self._static_keys = frozenset(self.__dict__) | {"_static_keys"}
@@ -145,8 +154,7 @@ class VertiportSim:
         hovers = lay.n_ports + rng.permutation(lay.n_hover)
         placement = np.concatenate([ports, hovers])[:n]
         order = rng.permutation(n)
-        lo, hi = cfg.schedule.initial_takeoff_min
-        takeoff_offsets = rng.integers(lo, hi + 1, size=n)
+        takeoff_offsets = self.schedule.initial_takeoffs_min(rng, n)
         dests = rng.integers(0, len(lay.destination_xy_m), size=n)
         for v, node in zip(order.tolist(), placement.tolist()):
             self._occupy(v, node)
@@ -160,7 +168,7 @@ class VertiportSim:
                 # A vehicle that starts at a hover spot has just arrived and waits to land.
                 self.status[v] = HOVERING
                 self.pending_kind[v] = PENDING_LANDING
-                self.pending_time[v] = cfg.schedule.landing_window_min
+                self.pending_time[v] = self.schedule.first_landing_min()
             self.dest[v] = dests[v]
         self.prev_pos[:] = self.pos
         self._update_delays()
@@ -192,7 +200,7 @@ class VertiportSim:
             if k != "_physics":
                 setattr(self, k, copy.deepcopy(v))
         self.physics.set_body_states(state["_physics"])
-        if not self._noisy_obs:
+        if not self.uncertainty.noisy_observations:
             self.obs_xy = self.pos[:, :2]  # a view of the positions, as after a step
 
     # ================================================================== bookkeeping helpers
@@ -337,39 +345,32 @@ class VertiportSim:
         v = self.acting
         a = self.check_action(v, action)
         cfg, rng, acts = self.cfg, self.rng, self.actions
-        un, rw = cfg.uncertainty, cfg.reward
+        un = cfg.uncertainty
         commanded = a
-        if un.action_misread_prob > 0 and rng.random() < un.action_misread_prob:
-            others = np.flatnonzero(self.action_mask(v))
-            others = others[others != a]
-            if others.size:
-                a = int(others[rng.integers(others.size)])
+        if un.action_misread_prob > 0:
+            a = self.uncertainty.misread(rng, a, self.action_mask(v))
         metrics = self.metrics
         info: dict[str, Any] = {
             "minute": self.minute, "acting_agent": self._agent_names[v], "action": a,
             "commanded_action": commanded, "takeoff": False, "good_takeoff": False,
             "takeoff_failed": False, "landing": False, "good_landing": False,
         }
-        mag = rw.term_magnitude
+        rm = self.reward_model
 
         # ---- safety term, from the state before anything moves (paper eqs. 3-5)
-        safety = 0.0
-        if self.conflict[v]:
-            safety = mag if a == acts.avoid else -mag
+        safety = rm.safety(bool(self.conflict[v]), a == acts.avoid)
         info["conflict"] = safety != 0.0
 
         # ---- apply the action
         tau = gamma = 0.0
-        tol = cfg.schedule.on_time_tolerance_min
         now = self.minute
         if a == acts.takeoff:
-            if un.takeoff_failure_prob > 0 and rng.random() < un.takeoff_failure_prob:
+            if self.uncertainty.takeoff_fails(rng):
                 info["takeoff_failed"] = True
                 metrics.failed_takeoffs += 1
             else:
-                good = abs(now - self.pending_time[v]) <= tol and self.battery[v] > rw.battery_threshold_pct
-                tau = mag if good else -mag
-                info["takeoff"], info["good_takeoff"] = True, bool(good)
+                tau, good = rm.takeoff(now, self.pending_time.item(v), self.battery.item(v))
+                info["takeoff"], info["good_takeoff"] = True, good
                 metrics.takeoffs += 1
                 metrics.good_takeoffs += int(good)
                 self._complete_operation(v, now)
@@ -378,9 +379,8 @@ class VertiportSim:
             node = a - 2
             landing = self.status[v] == HOVERING and self._is_port[node]
             if landing:
-                good = now <= self.pending_time[v] + tol and self.battery[v] > rw.battery_threshold_pct
-                gamma = mag if good else -mag
-                info["landing"], info["good_landing"] = True, bool(good)
+                gamma, good = rm.landing(now, self.pending_time.item(v), self.battery.item(v))
+                info["landing"], info["good_landing"] = True, good
                 metrics.landings += 1
                 metrics.good_landings += int(good)
                 self._complete_operation(v, now)
@@ -405,11 +405,7 @@ class VertiportSim:
         if self._holding:
             for h in sorted(self._holding):
                 self._assign_hover_spot(h)
-        failed_nodes: list[int] = []
-        if un.charger_failure_prob > 0:
-            draws = rng.random(len(self._charging_nodes)).tolist()
-            failed_nodes = [node for node, u in zip(self._charging_nodes.tolist(), draws)
-                            if u < un.charger_failure_prob]
+        failed_nodes = self.uncertainty.failed_chargers(rng, self._charging_node_list)
         info["charger_failures"] = len(failed_nodes)
         lost_before = self.metrics.stranded_air + self.metrics.stranded_ground
         info["battery_depletions"] = self._update_battery(status_during, failed_nodes)
@@ -421,8 +417,7 @@ class VertiportSim:
 
         # ---- reward of the acting vehicle (paper's eq. 2)
         lam, beta = self.battery_delay_terms(v)
-        reward = (rw.takeoff_weight * tau + rw.landing_weight * gamma + rw.battery_weight * lam
-                  + rw.delay_weight * beta + rw.safety_weight * safety)
+        reward = rm.total(tau, gamma, lam, beta, safety)
         info["reward_terms"] = {"takeoff": tau, "landing": gamma, "battery": lam, "delay": beta,
                                 "safety": safety}
         metrics.steps += 1
@@ -442,18 +437,9 @@ class VertiportSim:
 
     def battery_delay_terms(self, v: int) -> tuple[float, float]:
         """The paper's battery term lambda and delay term beta of vehicle ``v`` now, before
-        their weights: ``5 b / 100`` (or -5 below the threshold) and ``-5 + 10 exp(-delay)``."""
-        rw = self.cfg.reward
-        mag = rw.term_magnitude
-        battery = self.battery[v]
-        lam = mag * battery / 100.0 if battery >= rw.battery_threshold_pct else -mag
-        delay = self.delay.item(v)
-        decay = self._exp_neg_delay.get(delay)
-        if decay is None:
-            if len(self._exp_neg_delay) >= _EXP_MEMO_MAX:
-                self._exp_neg_delay.clear()
-            decay = self._exp_neg_delay[delay] = float(np.exp(-delay))
-        return lam, -mag + 2.0 * mag * decay
+        their weights (:class:`~marl_vertiport.sim.reward.RewardModel`)."""
+        rm = self.reward_model
+        return rm.battery(self.battery.item(v)), rm.delay(self.delay.item(v))
 
     @property
     def truncated(self) -> bool:
@@ -465,9 +451,7 @@ class VertiportSim:
 
     # ================================================================== action effects
     def _complete_operation(self, v: int, now: float) -> None:
-        late = now - self.pending_time[v]
-        if late > self.cfg.schedule.on_time_tolerance_min:
-            self.completed_delay[v] += late
+        self.completed_delay[v] += self.schedule.lateness_min(now, self.pending_time.item(v))
         self.pending_kind[v] = NO_OPERATION
         self.delay[v] = 0.0
 
@@ -532,26 +516,16 @@ class VertiportSim:
         if not cand:
             return
         speed = self.cfg.flight.cruise_speed_mps
-        pos, target, leg_alt = self.pos.tolist(), self.target.tolist(), self.leg_alt.tolist()
+        pos, target = self.pos.tolist(), self.target.tolist()
         vel, start, end = {}, {}, {}
         for v in cand:
-            dx, dy = target[v][0] - pos[v][0], target[v][1] - pos[v][1]
-            d = math.hypot(dx, dy)
-            vel[v] = (dx / d * speed, dy / d * speed) if d > 1e-9 else (0.0, 0.0)
-            self.plan_vel_xy[v] = vel[v]
             start[v] = (pos[v][0], pos[v][1])
+            vel[v] = planned_velocity(start[v], (target[v][0], target[v][1]), speed)
+            self.plan_vel_xy[v] = vel[v]
             end[v] = tuple((self.routes[v][-1] if self.routes[v] else self.target[v])[:2].tolist())
-        sep = self.cfg.safety.min_separation_m
-        for i, a in enumerate(cand):
-            for b in cand[i + 1:]:
-                if abs(leg_alt[a] - leg_alt[b]) >= sep:
-                    continue
-                if segment_distance(start[a], end[a], start[b], end[b]) >= sep:
-                    continue
-                t_min, d_min = cpa([start[a][0] - start[b][0], start[a][1] - start[b][1]],
-                                   [vel[a][0] - vel[b][0], vel[a][1] - vel[b][1]])
-                if t_min >= 0.0 and d_min <= sep:
-                    self.conflict[a] = self.conflict[b] = True
+        for a, b in conflicting_pairs(cand, start, end, vel, self.leg_alt.tolist(),
+                                      self.cfg.safety.min_separation_m):
+            self.conflict[a] = self.conflict[b] = True
 
     # ================================================================== motion
     def _move(self) -> int:
@@ -573,15 +547,7 @@ class VertiportSim:
         if not moving:
             return 0
         dt, step_len = self.dt_s, self.step_len_m
-        un = self.cfg.uncertainty
-        keep = None
-        n_gusts = 0
-        if un.wind_gust_prob > 0:
-            lo, hi = un.gust_speed_loss_range
-            hit = self.rng.random(len(moving)) < un.wind_gust_prob
-            loss = self.rng.uniform(lo, hi, len(moving))
-            keep = np.where(hit, 1.0 - loss, 1.0).tolist()
-            n_gusts = int(hit.sum())
+        keep, n_gusts = self.uncertainty.gust_factors(self.rng, len(moving))
         pos, target, status, cmd_vel = self.pos, self.target, self.status, self.cmd_vel
         radius = self.layout.airspace_radius_m
         bodies, body_vel, body_keep, starts = [], [], [], []
@@ -650,9 +616,9 @@ class VertiportSim:
             self.status[v] = ON_CHARGER if lay.node_type[node] == CHARGING_PORT else ON_PORT
             if self.landing_cleared[v]:
                 self.landing_cleared[v] = False
-                lo, hi = cfg.schedule.takeoff_after_landing_min
                 self.pending_kind[v] = PENDING_TAKEOFF
-                self.pending_time[v] = self.minute + self.minutes_per_step + int(self.rng.integers(lo, hi + 1))
+                self.pending_time[v] = self.schedule.takeoff_after_landing_min(
+                    self.rng, self.minute + self.minutes_per_step)
                 self.dest[v] = int(self.rng.integers(len(lay.destination_xy_m)))
                 self.metrics.completed_trips += 1
                 return 1
@@ -676,7 +642,7 @@ class VertiportSim:
             self.status[v] = ARRIVING
             self.returning[v] = False
             self.pending_kind[v] = PENDING_LANDING
-            self.pending_time[v] = self.minute + self.minutes_per_step + cfg.schedule.landing_window_min
+            self.pending_time[v] = self.schedule.landing_min(self.minute + self.minutes_per_step)
             self.physics.make_static(v, self.pos[v])
             self._assign_hover_spot(v)
             return 0
@@ -715,13 +681,7 @@ class VertiportSim:
                         if o != m and present[o]})
         if not pairs:
             return 0, 0
-        if len(pairs) > _SCALAR_PAIRS_MAX:
-            pi = np.fromiter((a for a, _ in pairs), dtype=np.int64, count=len(pairs))
-            pj = np.fromiter((b for _, b in pairs), dtype=np.int64, count=len(pairs))
-            dmin = swept_min_distance(self.prev_pos, self.pos, pi, pj).tolist()
-        else:
-            start, end = self.prev_pos.tolist(), self.pos.tolist()
-            dmin = [swept_min_distance_pair(start[a], end[a], start[b], end[b]) for a, b in pairs]
+        dmin = swept_distances_m(self.prev_pos, self.pos, pairs)
         sep = self.cfg.safety.min_separation_m
         losses = {pair for pair, d in zip(pairs, dmin) if d < sep}
         kept = {pair for pair in self.sep_state if pair[0] not in mover_set and pair[1] not in mover_set}
@@ -752,26 +712,16 @@ class VertiportSim:
 
         Scalar per vehicle, as :meth:`_move`: a handful of numpy calls on ``N``-vectors cost
         more than the loop for fleets of a few dozen."""
-        bat = self.cfg.battery
-        # Per-status rates, then the vehicles that flew far enough to count as cruising.
-        rate = self._battery_rate
-        change = [rate[s] for s in status_during]
-        for v, dist in zip(self._moved, self._moved_m):
-            if dist >= bat.min_cruise_distance_m:
-                change[v] = -bat.cruise_drain_pct_per_m * dist
+        failed_charging = ()
         if failed_nodes:
             # A charger that fails this step leaves its vehicle idling on the ground.
             node = self.node.tolist()
-            for v, s in enumerate(status_during):
-                if s == ON_CHARGER and node[v] in failed_nodes:
-                    change[v] = -bat.ground_idle_drain_pct
-        level = self.battery.tolist()
-        empty = []
-        for v, c in enumerate(change):
-            b = level[v] + c
-            level[v] = b = 0.0 if b < 0.0 else 100.0 if b > 100.0 else b  # clipped to [0, 100]
-            if b <= 0.0 and _AIRBORNE[status_during[v]]:
-                empty.append(v)
+            failed_charging = [v for v, s in enumerate(status_during)
+                               if s == ON_CHARGER and node[v] in failed_nodes]
+        change = self.battery_model.changes(status_during, zip(self._moved, self._moved_m),
+                                            failed_charging)
+        level = self.battery_model.apply(self.battery.tolist(), change)
+        empty = [v for v, b in enumerate(level) if b <= 0.0 and _AIRBORNE[status_during[v]]]
         self.battery[:] = level
         if not empty:
             return 0
@@ -834,9 +784,8 @@ class VertiportSim:
         nearest such port, so nothing lands on top of it. A late
         operation it leaves undone keeps its lateness (at the end of this step) in the metrics."""
         if self.pending_kind[v] != NO_OPERATION:
-            late = self.minute + self.minutes_per_step - self.pending_time[v]
-            if late > self.cfg.schedule.on_time_tolerance_min:
-                self.completed_delay[v] += late
+            self.completed_delay[v] += self.schedule.lateness_min(
+                self.minute + self.minutes_per_step, self.pending_time.item(v))
         self.has_target[v] = False
         self.routes[v] = []
         self.avoid_layer[v] = -1
@@ -857,28 +806,16 @@ class VertiportSim:
     def _update_delays(self) -> None:
         """Minutes since each pending operation's time, and the delay (that lateness beyond the
         tolerance, else 0), shape ``(N,)``."""
-        tol = self.cfg.schedule.on_time_tolerance_min
-        rel = np.subtract(self.minute, self.pending_time, out=self._rel_min).tolist()
-        # r * False is r * 0.0: -0.0 while an operation is not yet due, as the features show.
-        self.delay[:] = [r * (r > tol and k != NO_OPERATION)
-                         for r, k in zip(rel, self.pending_kind.tolist())]
+        self.delay[:] = self.schedule.delays_min(self.minute, self.pending_time,
+                                                 self.pending_kind.tolist(), self._rel_min)
 
     def _draw_observation_noise(self) -> None:
-        if self._noisy_obs:
-            un = self.cfg.uncertainty
-            self.obs_xy = self.pos[:, :2] + self.rng.normal(
-                un.position_noise_mean_m, un.position_noise_std_m, size=(self.n, 2))
-        else:
-            self.obs_xy = self.pos[:, :2]
+        self.obs_xy = self.uncertainty.observed_xy(self.rng, self.pos[:, :2])
 
     # ================================================================== graph features
     def schedule_status(self) -> np.ndarray:
         """-1 early, 0 on time, 1 delayed, per vehicle, shape ``(N,)``."""
-        tol = self.cfg.schedule.on_time_tolerance_min
-        rel = self.minute - self.pending_time
-        early = (rel < -tol) & (self.pending_kind == PENDING_TAKEOFF)
-        delayed = (rel > tol) & (self.pending_kind != NO_OPERATION)
-        return delayed.astype(np.int64) * DELAYED + early.astype(np.int64) * EARLY
+        return self.schedule.status_codes(self.minute, self.pending_time, self.pending_kind)
 
     def _evtol_base(self) -> np.ndarray:
         """eVTOL node features ``(N, 13)`` float32 with ``is_self`` 0, cached until the next step.
@@ -888,7 +825,7 @@ class VertiportSim:
         of the cost of a dozen column assignments and the array masks of
         :meth:`schedule_status` (which gives the same column), for 16 about the same cost."""
         if self._evtol_cache is None:
-            tol = self.cfg.schedule.on_time_tolerance_min
+            status_code = self.schedule.status_code
             minute = self.minute
             values: list[float] = []
             for st, bat, pk, pt, rel, (ox, oy), (_, _, z), (vx, vy), d, c, nd in zip(
@@ -896,14 +833,7 @@ class VertiportSim:
                     self.pending_time.tolist(), self._rel_min.tolist(), self.obs_xy.tolist(),
                     self.pos.tolist(), self.plan_vel_xy.tolist(), self.delay.tolist(),
                     self.conflict.tolist(), self.node.tolist()):
-                r = minute - pt
-                if r > tol and pk != NO_OPERATION:
-                    sched = DELAYED
-                elif r < -tol and pk == PENDING_TAKEOFF:
-                    sched = EARLY
-                else:
-                    sched = ON_TIME
-                values += (st, bat, sched, ox, oy, z, vx, vy,
+                values += (st, bat, status_code(minute - pt, pk), ox, oy, z, vx, vy,
                            -rel if pk != NO_OPERATION else 0.0, d, c, nd, 0.0)
             self._evtol_cache = np.array(values, dtype=np.float32).reshape(self.n, len(EVTOL_FEATURES))
         return self._evtol_cache
