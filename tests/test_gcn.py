@@ -373,3 +373,55 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
     (tmp_path / "cut" / WARM_STATE).write_bytes(b"junk")
     with pytest.raises(ValueError, match="not a readable warm-start state"):
         imitation.load_warm_start_state(tmp_path / "cut" / WARM_STATE)
+
+
+def test_log_writer_passes_each_iteration_to_the_runs_listener(tmp_path):
+    """rsl_rl's LogWriter extension point: the listener sees an iteration as soon as its last
+    always-logged scalar arrives, and whole (with Train/ scalars) once the next one starts."""
+    from agents.gcn.train.log_writer import (
+        RunLogWriter, register_listener, unregister_listener,
+    )
+
+    calls = []
+
+    class Listener:
+        def iteration_updated(self, it, scalars):
+            calls.append(("updated", it, sorted(scalars)))
+
+        def iteration_done(self, it, scalars):
+            calls.append(("done", it, scalars.get("Train/mean_reward")))
+
+    register_listener(tmp_path, Listener())
+    try:
+        writer = RunLogWriter(str(tmp_path), tensorboard=False)
+        for it, reward in ((0, None), (1, 12.5)):
+            writer.add_scalar("Loss/value", 0.5, it)
+            writer.add_scalar("Perf/learning_time", 0.1, it)
+            if reward is not None:
+                writer.add_scalar("Train/mean_reward", reward, it)
+                writer.add_scalar("Train/mean_reward/time", reward, 37)  # indexed by seconds
+        writer.stop()
+    finally:
+        unregister_listener(tmp_path)
+    assert calls == [("updated", 0, ["Loss/value", "Perf/learning_time"]), ("done", 0, None),
+                     ("updated", 1, ["Loss/value", "Perf/learning_time"]), ("done", 1, 12.5)]
+
+
+def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):
+    from rsl_rl.algorithms import PPO
+
+    from agents.gcn.train.ppo import WarmupPPO
+
+    seen = []
+    monkeypatch.setattr(PPO, "update", lambda self: seen.append(
+        all(p.requires_grad for p in self.actor.parameters())) or {})
+    alg = WarmupPPO.__new__(WarmupPPO)  # the update logic alone, without rsl_rl's set-up
+    alg.actor = torch.nn.Linear(2, 2)
+    alg.critic_warmup_updates, alg.updates_done = 2, 0
+    for _ in range(4):
+        alg.update()
+    assert seen == [False, False, True, True]
+    assert all(p.requires_grad for p in alg.actor.parameters())
+    alg.updates_done, alg.critic_warmup_updates = 5, 3  # resumed past the warm-up: untouched
+    alg.update()
+    assert seen[-1] is True

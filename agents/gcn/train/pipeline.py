@@ -35,6 +35,7 @@ from agents.common.files import write_atomic
 from agents.gcn.train.imitation import ROUND_METRICS, TEACHERS, warm_start
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
+from agents.gcn.train.log_writer import register_listener, unregister_listener
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 from marl_vertiport.config import (
     ConfigError, build_dataclass, load_config, load_yaml_dataclass, to_dict,
@@ -213,10 +214,12 @@ def runner_config(cfg: TrainConfig) -> dict[str, Any]:
     return {
         "num_steps_per_env": cfg.num_steps_per_env,
         "save_interval": cfg.save_interval,
-        "logger": "tensorboard",
+        # Our progress line, curves and divergence check, through rsl_rl's LogWriter extension.
+        "logger": {"class_name": "agents.gcn.train.log_writer:RunLogWriter"},
         "obs_groups": {"actor": list(POLICY_GROUPS),
                        "critic": list(STATE_GROUPS if centralised_critic else POLICY_GROUPS)},
-        "algorithm": {"class_name": "PPO", **to_dict(cfg.algorithm)},
+        "algorithm": {"class_name": "agents.gcn.train.ppo:WarmupPPO", **to_dict(cfg.algorithm),
+                      "critic_warmup_updates": cfg.critic_warmup_iterations},
         "actor": {"class_name": "agents.gcn.models:GraphActor", "feature_names": feature_names("observation"),
                   "mask_group": "action_mask",
                   "distribution_cfg": {"class_name": "agents.gcn.distribution:MaskedCategorical"}, **model},
@@ -250,26 +253,14 @@ def _make_runner_class():
 
     class AtomicRunner(OnPolicyRunner):
         """``OnPolicyRunner`` whose checkpoints are written atomically and carry the metadata
-        needed to check them against an env, with a hook after every iteration."""
+        needed to check them against an env."""
 
         checkpoint_infos: dict[str, Any] = {}
-        on_iteration = None
 
         def save(self, path: str, infos: dict | None = None) -> None:
             tmp = f"{path}.tmp"
             super().save(tmp, {**self.checkpoint_infos, **(infos or {})})
             os.replace(tmp, path)
-
-        def install_hook(self) -> None:
-            original = self.logger.log
-
-            def log(*args, **kwargs):
-                with contextlib.redirect_stdout(io.StringIO()):  # our own progress line instead
-                    original(*args, **kwargs)
-                if self.on_iteration is not None:
-                    self.on_iteration(self, kwargs)
-
-            self.logger.log = log
 
     return AtomicRunner
 
@@ -460,55 +451,68 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     t0 = time.time()
     start_it = runner.current_learning_iteration
 
-    def on_iteration(r, kwargs) -> None:
-        it = kwargs["it"]
-        losses = kwargs["loss_dict"]
-        bad = [k for k, v in losses.items() if not math.isfinite(float(v))]
-        bad_params = [n for n, p in list(r.alg.actor.named_parameters()) + list(r.alg.critic.named_parameters())
-                      if not torch.isfinite(p).all()]
-        if bad or bad_params:
-            raise TrainingDiverged(f"training diverged at iteration {it}: non-finite "
-                                   f"{', '.join(bad + bad_params[:3])}; the last good checkpoint "
-                                   f"is kept in {run_dir}")
-        row = {"iteration": it, "env_steps": (it + 1) * samples_per_it,
-               "steps_per_s": samples_per_it * (it + 1 - start_it) / max(time.time() - t0, 1e-9),
-               "mean_reward": float(np.mean(r.logger.rewbuffer)) if len(r.logger.rewbuffer) else float("nan"),
-               "value_loss": float(losses.get("value", float("nan"))),
-               "surrogate_loss": float(losses.get("surrogate", float("nan"))),
-               "entropy": float(losses.get("entropy", float("nan"))),
-               "learning_rate": float(kwargs["learning_rate"])}
-        row.update(vec_env.pop_episode_means())
-        curves.append(row)
-        write_curves(curves_path, curves)
-        done = it + 1 - start_it
-        eta = (time.time() - t0) / done * (cfg.iterations - it - 1)
-        msg = (f"it {it + 1:4d}/{cfg.iterations}  {row['steps_per_s']:6.0f} steps/s  "
-               f"lr {row['learning_rate']:.1e}  value loss {row['value_loss']:8.3f}")
-        if math.isfinite(row.get("total_reward", float("nan"))):
-            msg += (f"  | day: reward {row['total_reward']:7.1f} battery {row['mean_battery_pct']:4.1f}% "
-                    f"good TO/LD {row['good_takeoffs']:4.1f}/{row['good_landings']:4.1f} "
-                    f"delay {row['mean_delay_min']:6.1f} coll {row['collisions']:4.1f} "
-                    f"lost {row['stranded_air']:3.1f} air/{row['stranded_ground']:3.1f} ground")
-        log(f"{msg}  eta {eta / 60:4.1f} min")
+    pending: dict[int, dict[str, float]] = {}
+    terminal = sys.stdout  # rsl_rl's own iteration report is silenced below; ours is not
 
-    warmup_end = cfg.critic_warmup_iterations
-    frozen = runner.current_learning_iteration < warmup_end
-    if frozen:
-        runner.alg.actor.requires_grad_(False)
-        log(f"critic warm-up: actor frozen for the first {warmup_end} iterations")
+    def say(msg: str) -> None:
+        with contextlib.redirect_stdout(terminal):
+            log(msg)
 
-    def hook(r, kwargs) -> None:
-        on_iteration(r, kwargs)
-        if kwargs["it"] + 1 == warmup_end:
-            r.alg.actor.requires_grad_(True)
+    class Progress:
+        """The run's listener (agents/gcn/train/log_writer.py): divergence check, progress
+        line and the row of curves.csv of every iteration."""
 
-    runner.on_iteration = hook
-    runner.install_hook()
+        def iteration_updated(self, it: int, scalars: dict[str, float]) -> None:
+            bad = [k for k, v in scalars.items() if k.startswith("Loss/") and not math.isfinite(v)]
+            params = list(runner.alg.actor.named_parameters()) + list(runner.alg.critic.named_parameters())
+            bad_params = [n for n, p in params if not torch.isfinite(p).all()]
+            if bad or bad_params:
+                raise TrainingDiverged(f"training diverged at iteration {it}: non-finite "
+                                       f"{', '.join(bad + bad_params[:3])}; the last good checkpoint "
+                                       f"is kept in {run_dir}")
+            nan = float("nan")
+            row = {"iteration": it, "env_steps": (it + 1) * samples_per_it,
+                   "steps_per_s": samples_per_it * (it + 1 - start_it) / max(time.time() - t0, 1e-9),
+                   "mean_reward": nan,
+                   "value_loss": scalars.get("Loss/value", nan),
+                   "surrogate_loss": scalars.get("Loss/surrogate", nan),
+                   "entropy": scalars.get("Loss/entropy", nan),
+                   "learning_rate": scalars.get("Loss/learning_rate", nan)}
+            row.update(vec_env.pop_episode_means())  # the episodes of this iteration
+            pending[it] = row
+            done = it + 1 - start_it
+            eta = (time.time() - t0) / done * (cfg.iterations - it - 1)
+            msg = (f"it {it + 1:4d}/{cfg.iterations}  {row['steps_per_s']:6.0f} steps/s  "
+                   f"lr {row['learning_rate']:.1e}  value loss {row['value_loss']:8.3f}")
+            if math.isfinite(row.get("total_reward", nan)):
+                msg += (f"  | day: reward {row['total_reward']:7.1f} battery {row['mean_battery_pct']:4.1f}% "
+                        f"good TO/LD {row['good_takeoffs']:4.1f}/{row['good_landings']:4.1f} "
+                        f"delay {row['mean_delay_min']:6.1f} coll {row['collisions']:4.1f} "
+                        f"lost {row['stranded_air']:3.1f} air/{row['stranded_ground']:3.1f} ground")
+            say(f"{msg}  eta {eta / 60:4.1f} min")
+
+        def iteration_done(self, it: int, scalars: dict[str, float]) -> None:
+            row = pending.pop(it, None)
+            if row is None:
+                return
+            row["mean_reward"] = scalars.get("Train/mean_reward", float("nan"))
+            curves.append(row)
+            write_curves(curves_path, curves)
+
+    runner.alg.updates_done = runner.current_learning_iteration
+    if runner.alg.actor_frozen:
+        log(f"critic warm-up: actor frozen for the first {cfg.critic_warmup_iterations} iterations")
+    register_listener(run_dir, Progress())
     if remaining > 0:
         where = ", ".join(cfg.scenarios) if cfg.scenarios else cfg.env_config
         log(f"training {cfg.mode} on {where}: {remaining} iterations of "
             f"{samples_per_it} env steps ({cfg.num_envs} copies x {cfg.num_steps_per_env})")
-        runner.learn(remaining)
+        try:
+            # rsl_rl prints a report of every iteration; ours is the one line of `say`.
+            with open(os.devnull, "w") as quiet, contextlib.redirect_stdout(quiet):
+                runner.learn(remaining)
+        finally:
+            unregister_listener(run_dir)
     final = latest_checkpoint(run_dir)
     vec_env.close()
     if curves or warm_rows:
