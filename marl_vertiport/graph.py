@@ -21,9 +21,15 @@ import numpy as np
 import torch
 from torch_geometric.data import Batch
 
-_GRAPH_KEYS = ("port_nodes", "evtol_nodes", "self", "port_edge_index", "evtol_edge_index")
-_UNBATCHED_NDIM = {"port_nodes": 2, "evtol_nodes": 2, "self": 1, "port_edge_index": 2,
-                   "evtol_edge_index": 2, "action_mask": 1}
+_GRAPH_KEYS = ("port_nodes", "evtol_nodes", "self")
+_UNBATCHED_NDIM = {"port_nodes": 2, "evtol_nodes": 2, "self": 1, "action_mask": 1}
+
+
+def complete_edge_index(n: int) -> np.ndarray:
+    """Edges of a complete directed graph without self-loops, shape ``(2, n (n - 1))``: both
+    graphs of an observation are complete (docs/environment.md, section 5.4)."""
+    src, dst = np.nonzero(~np.eye(n, dtype=bool))
+    return np.stack([src, dst]).astype(np.int64)
 
 
 @dataclass
@@ -85,12 +91,13 @@ def _collate(obs: Any) -> dict[str, Any]:
     return out
 
 
-def _graph_batch(nodes: torch.Tensor, edges: torch.Tensor) -> Batch:
-    """``nodes (B, K, F)``, ``edges (B, 2, E)`` -> one PyG batch of ``B`` graphs."""
+def _graph_batch(nodes: torch.Tensor) -> Batch:
+    """``nodes (B, K, F)`` -> one PyG batch of ``B`` complete graphs of ``K`` nodes."""
     b, k, f = nodes.shape
     device = nodes.device
+    edges = torch.as_tensor(complete_edge_index(k), device=device)  # (2, E)
     offsets = (torch.arange(b, device=device) * k).view(b, 1, 1)
-    edge_index = (edges.long() + offsets).permute(1, 0, 2).reshape(2, -1)
+    edge_index = (edges.unsqueeze(0) + offsets).permute(1, 0, 2).reshape(2, -1)
     batch = torch.arange(b, device=device).repeat_interleave(k)
     ptr = torch.arange(b + 1, device=device) * k
     out = Batch(x=nodes.reshape(b * k, f).float(), edge_index=edge_index, batch=batch, ptr=ptr)
@@ -106,8 +113,8 @@ def to_graph_batch(obs: Any, device: torch.device | str | None = None) -> GraphO
         tensors = {k: v.unsqueeze(0) for k, v in tensors.items()}
     mask = tensors.get("action_mask")
     return GraphObservation(
-        ports=_graph_batch(tensors["port_nodes"], tensors["port_edge_index"]),
-        evtols=_graph_batch(tensors["evtol_nodes"], tensors["evtol_edge_index"]),
+        ports=_graph_batch(tensors["port_nodes"]),
+        evtols=_graph_batch(tensors["evtol_nodes"]),
         self_features=tensors["self"].float(),
         action_mask=mask.bool() if mask is not None else None,
     )
@@ -121,5 +128,4 @@ def to_state_batch(state: Any, device: torch.device | str | None = None) -> tupl
     t = {k: _as_tensor(v, device) for k, v in state.items()}
     if t["port_nodes"].dim() == 2:
         t = {k: v.unsqueeze(0) for k, v in t.items()}
-    return (_graph_batch(t["port_nodes"], t["port_edge_index"]),
-            _graph_batch(t["evtol_nodes"], t["evtol_edge_index"]), t["clock"].float())
+    return _graph_batch(t["port_nodes"]), _graph_batch(t["evtol_nodes"]), t["clock"].float()

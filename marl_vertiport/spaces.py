@@ -40,12 +40,6 @@ class LegalDiscrete(spaces.Discrete):
         return (spaces.Discrete, (int(self.n),))
 
 
-def complete_edge_index(n: int) -> np.ndarray:
-    """Edges of a complete directed graph without self-loops, shape ``(2, n (n - 1))``."""
-    src, dst = np.nonzero(~np.eye(n, dtype=bool))
-    return np.stack([src, dst]).astype(np.int64)
-
-
 def _box(shape: tuple[int, ...], low: float = -np.inf, high: float = np.inf,
          dtype: type = np.float32) -> spaces.Box:
     return spaces.Box(low=low, high=high, shape=shape, dtype=dtype)
@@ -59,22 +53,19 @@ class ObservationBuilder:
     - ``observation["port_nodes"]``: ``(P, 4)`` float32, :data:`PORT_FEATURES`.
     - ``observation["evtol_nodes"]``: ``(N, 13)`` float32, :data:`EVTOL_FEATURES`.
     - ``observation["self"]``: ``(11,)`` float32, :data:`SELF_FEATURES` of ``v``.
-    - ``observation["port_edge_index"]``: ``(2, P (P-1))`` int64, complete graph.
-    - ``observation["evtol_edge_index"]``: ``(2, N (N-1))`` int64, complete graph.
     - ``action_mask``: ``(A,)`` int8, 1 = legal.
+
+    Both graphs are complete (every node is linked to every other), so no edge arrays are
+    sent; :func:`marl_vertiport.graph.to_graph_batch` builds them for torch-geometric.
     """
 
     def __init__(self, sim: VertiportSim) -> None:
         self.sim = sim
         n, p, a = sim.n, sim.layout.n_nodes, sim.actions.n
-        self.port_edges = complete_edge_index(p)
-        self.evtol_edges = complete_edge_index(n)
         graph = spaces.Dict({
             "port_nodes": _box((p, len(PORT_FEATURES))),
             "evtol_nodes": _box((n, len(EVTOL_FEATURES))),
             "self": _box((len(SELF_FEATURES),)),
-            "port_edge_index": _box(self.port_edges.shape, 0, max(p - 1, 0), np.int64),
-            "evtol_edge_index": _box(self.evtol_edges.shape, 0, max(n - 1, 0), np.int64),
         })
         self.observation_space = spaces.Dict({
             "observation": graph,
@@ -84,8 +75,6 @@ class ObservationBuilder:
             "port_nodes": _box((p, len(STATE_PORT_FEATURES))),
             "evtol_nodes": _box((n, len(EVTOL_FEATURES) + len(STATE_EXTRA_FEATURES))),
             "clock": _box((len(CLOCK_FEATURES),)),
-            "port_edge_index": graph["port_edge_index"],
-            "evtol_edge_index": graph["evtol_edge_index"],
         })
         self.action_space = spaces.Discrete(a)
 
@@ -96,14 +85,9 @@ class ObservationBuilder:
                 "port_nodes": sim.port_nodes(),
                 "evtol_nodes": sim.evtol_nodes(v),
                 "self": sim.self_features(v),
-                "port_edge_index": self.port_edges.copy(),
-                "evtol_edge_index": self.evtol_edges.copy(),
             },
             "action_mask": sim.action_mask(v).copy(),
         }
 
     def state(self) -> dict:
-        out = self.sim.state_arrays()
-        out["port_edge_index"] = self.port_edges.copy()
-        out["evtol_edge_index"] = self.evtol_edges.copy()
-        return out
+        return self.sim.state_arrays()

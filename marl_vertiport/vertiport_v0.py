@@ -16,8 +16,9 @@ Action space:
     hover spots), ``2+P`` continue previous action, ``3+P`` avoid collision.
 
 Observation space:
-    ``{"observation": {port_nodes, evtol_nodes, self, port_edge_index, evtol_edge_index},
-    "action_mask": int8}``; see ``docs/environment.md`` for each feature's index and unit.
+    ``{"observation": {port_nodes, evtol_nodes, self}, "action_mask": int8}`` (both graphs are
+    complete; ``marl_vertiport.graph`` builds their edges); see ``docs/environment.md`` for each
+    feature's index and unit.
 
 State:
     ``state()`` is the global, noise-free graph (true positions, velocities, destinations,

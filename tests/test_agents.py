@@ -248,3 +248,26 @@ def test_the_controller_example_of_docs_controllers_md_plays_a_legal_day():
     metrics = run_aec_episode(vertiport_v0.env(config="paper_uncertain"),
                               namespace["LandOnChargerFirst"](), seed=3)
     assert metrics["steps"] == 1440
+
+
+def test_pyg_example_acts_legally_on_two_vertiports_through_to_graph_batch():
+    """examples/pyg_policy.py: torch-geometric layers on marl_vertiport.graph's batches, one set
+    of weights on the paper's vertiport and on mid (2 hours of each)."""
+    import torch
+
+    from agents.controllers.base import run_aec_episode
+    from examples.pyg_policy import PygController, PygPolicy
+    from marl_vertiport import vertiport_v0
+    from marl_vertiport.graph import to_graph_batch
+
+    for config in ("paper", "mid"):
+        env = vertiport_v0.env(config=config, schedule__episode_steps=120)
+        metrics = run_aec_episode(env, PygController(), seed=0)  # illegal actions would raise
+        assert metrics["steps"] == 120
+        env.reset(seed=1)
+        obs = [env.observe(a) for a in env.agents]
+        logits = PygPolicy()(obs)
+        legal = torch.as_tensor(np.stack([o["action_mask"] for o in obs])).bool()
+        assert logits.shape == legal.shape and torch.isinf(logits[~legal]).all()
+        assert torch.isfinite(logits[legal]).all()
+        assert to_graph_batch(obs).num_graphs == len(obs)
