@@ -37,11 +37,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from marl_vertiport.config import EnvConfig, load_config
-from marl_vertiport.render import draw_scenery, render_frame
-from marl_vertiport.sim.core import VertiportSim
-from marl_vertiport.sim.physics import display_available
-from marl_vertiport.spaces import LegalDiscrete, ObservationBuilder
+from marl_vertiport.config import EnvConfig
+from marl_vertiport.render import render_frame
+from marl_vertiport.spaces import LegalDiscrete
+from marl_vertiport.world import make_world
 
 
 class VertiportEnv(gym.Env):
@@ -51,15 +50,9 @@ class VertiportEnv(gym.Env):
 
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode {render_mode!r} is not one of "
-                             f"{self.metadata['render_modes']} or None")
-        self.config = load_config(config, **overrides)
+        world = make_world(config, render_mode, self.metadata["render_modes"], **overrides)
+        self.config, self.sim, self._builder = world.config, world.sim, world.builder
         self.render_mode = render_mode
-        self.sim = VertiportSim(self.config, gui=render_mode == "human" and display_available())
-        self._builder = ObservationBuilder(self.sim)
-        if self.sim.physics.gui:
-            draw_scenery(self.sim)
         self.observation_space = self._builder.observation_space
         # sample() draws among the legal actions of the acting eVTOL (see LegalDiscrete).
         self.action_space = LegalDiscrete(self.sim.actions.n, self.action_masks)

@@ -49,11 +49,9 @@ from gymnasium.utils import seeding
 from pettingzoo import AECEnv
 from pettingzoo.utils import wrappers
 
-from marl_vertiport.config import EnvConfig, load_config
-from marl_vertiport.render import draw_scenery, render_frame
-from marl_vertiport.sim.core import VertiportSim
-from marl_vertiport.sim.physics import display_available
-from marl_vertiport.spaces import ObservationBuilder
+from marl_vertiport.config import EnvConfig
+from marl_vertiport.render import render_frame
+from marl_vertiport.world import make_world
 
 __all__ = ["OrderEnforcing", "env", "raw_env", "reset_agent_dicts"]
 
@@ -104,15 +102,9 @@ class raw_env(AECEnv):
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
         super().__init__()
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode {render_mode!r} is not one of "
-                             f"{self.metadata['render_modes']} or None")
-        self.config = load_config(config, **overrides)
+        world = make_world(config, render_mode, self.metadata["render_modes"], **overrides)
+        self.config, self.sim, self._builder = world.config, world.sim, world.builder
         self.render_mode = render_mode
-        self.sim = VertiportSim(self.config, gui=render_mode == "human" and display_available())
-        self._builder = ObservationBuilder(self.sim)
-        if self.sim.physics.gui:
-            draw_scenery(self.sim)
         self.possible_agents = [f"evtol_{i}" for i in range(self.sim.n)]
         self.agent_name_mapping = {a: i for i, a in enumerate(self.possible_agents)}
         self.observation_spaces = dict.fromkeys(self.possible_agents, self._builder.observation_space)

@@ -1,0 +1,41 @@
+"""What both envs build the same way from a config: the simulator, its observation builder and,
+in a window, the scenery."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from marl_vertiport.config import EnvConfig, load_config
+from marl_vertiport.render import draw_scenery
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.physics import display_available
+from marl_vertiport.spaces import ObservationBuilder
+
+
+@dataclass
+class World:
+    """One env's config, simulator and observation builder."""
+
+    config: EnvConfig
+    sim: VertiportSim
+    builder: ObservationBuilder
+
+
+def make_world(config: str | EnvConfig | dict | None, render_mode: str | None,
+               render_modes: list[str], **overrides: Any) -> World:
+    """Validate ``render_mode`` against ``render_modes``, load the config with ``overrides``,
+    and build the simulator (pybullet's window for ``"human"`` where a display exists).
+
+    Raises:
+        ValueError: an unknown render mode.
+        ConfigError: a bad config or override.
+    """
+    if render_mode is not None and render_mode not in render_modes:
+        raise ValueError(f"render_mode {render_mode!r} is not one of {render_modes} or None")
+    cfg = load_config(config, **overrides)
+    sim = VertiportSim(cfg, gui=render_mode == "human" and display_available())
+    builder = ObservationBuilder(sim)
+    if sim.physics.gui:
+        draw_scenery(sim)
+    return World(cfg, sim, builder)
