@@ -112,7 +112,6 @@ class FlightPhysics:
         )
         half = [vehicle_size_m / 2.0, vehicle_size_m / 2.0, vehicle_height_m / 2.0]
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
-        self._visual_shapes: list[int] = []
         self.bodies: list[int] = []
         for i in range(n_vehicles):
             visual = p.createVisualShape(
