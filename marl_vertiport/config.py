@@ -11,6 +11,7 @@ Units are in the field names: ``_m`` metres, ``_mps`` metres per second, ``_s`` 
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 import typing
 from dataclasses import dataclass, field
@@ -69,7 +70,11 @@ class FlightConfig:
     flight_seconds_per_step: float = 0.25
     """Seconds of physical flight simulated per decision step (one schedule minute)."""
     physics_rate_hz: float = 48.0
-    """Physics update rate of the flight engine (the paper: at least 45 Hz)."""
+    """Physics update rate of the flight engine: at least 45 Hz (the paper's floor) unless
+    ``allow_low_physics_rate``, at most 2000 Hz."""
+    allow_low_physics_rate: bool = False
+    """Accept a physics rate under the paper's 45 Hz floor (a coarser, faster engine for quick
+    experiments; not the paper's model)."""
     hover_altitude_m: float = 4.0
     """Altitude of hover spots and of moves between ports and hover spots."""
     transit_altitude_m: float = 8.0
@@ -205,9 +210,39 @@ class EnvConfig:
 # --------------------------------------------------------------------------------------
 
 
+#: The paper's floor for the physics update rate ("at least 45 Hz").
+PHYSICS_RATE_FLOOR_HZ = 45.0
+#: The highest physics rate accepted: above it a step's substeps cost time for no accuracy.
+PHYSICS_RATE_MAX_HZ = 2000.0
+
+
 def _check(cond: bool, fieldname: str, msg: str) -> None:
     if not cond:
         raise ConfigError(f"{fieldname}: {msg}")
+
+
+def _check_spacing(cfg: EnvConfig) -> None:
+    """Pads (normal and charging ports) and hover spots must stand at least a vehicle size plus
+    the minimum separation apart, each kind among its own (hover spots are 4 m up, pads on the
+    ground): two vehicles parked or hovering side by side are then never in a loss of
+    separation, and never inside one another."""
+    lay = cfg.layout
+    spacing = cfg.flight.vehicle_size_m + cfg.safety.min_separation_m
+    rule = (f"must stand at least vehicle_size_m + safety.min_separation_m = {spacing:g} m "
+            "from every other")
+    pads = [(f"layout.normal_ports_xy_m[{i}]", xy) for i, xy in enumerate(lay.normal_ports_xy_m)]
+    pads += [(f"layout.charging_ports_xy_m[{i}]", xy) for i, xy in enumerate(lay.charging_ports_xy_m)]
+    spots = [(f"layout.hover_spots_xy_m[{i}]", xy) for i, xy in enumerate(lay.hover_spots_xy_m)]
+    for group, kind in ((pads, "pad"), (spots, "hover spot")):
+        for i, (name_a, a) in enumerate(group):
+            for name_b, b in group[i + 1:]:
+                d = math.dist(a, b)
+                _check(d >= spacing, name_b, f"is {d:g} m from {name_a}: a {kind} {rule}")
+    if not lay.hover_spots_xy_m and lay.hover_ring_count >= 2:
+        chord = 2.0 * lay.hover_ring_radius_m * math.sin(math.pi / lay.hover_ring_count)
+        _check(chord >= spacing, "layout.hover_ring_radius_m",
+               f"{lay.hover_ring_count} spots on a ring of {lay.hover_ring_radius_m:g} m stand "
+               f"{chord:.3g} m apart: a hover spot {rule}")
 
 
 def _validate(cfg: EnvConfig) -> None:
@@ -245,6 +280,13 @@ def _validate(cfg: EnvConfig) -> None:
                  "hover_altitude_m", "transit_altitude_m", "vehicle_size_m",
                  "vehicle_height_m", "vehicle_mass_kg"):
         _check(getattr(fl, name) > 0, f"flight.{name}", f"must be > 0, got {getattr(fl, name)}")
+    if not fl.allow_low_physics_rate:
+        _check(fl.physics_rate_hz >= PHYSICS_RATE_FLOOR_HZ, "flight.physics_rate_hz",
+               f"must be >= {PHYSICS_RATE_FLOOR_HZ:g} Hz (the paper's floor), got "
+               f"{fl.physics_rate_hz:g}; set flight.allow_low_physics_rate: true to go below it")
+    _check(fl.physics_rate_hz <= PHYSICS_RATE_MAX_HZ, "flight.physics_rate_hz",
+           f"must be <= {PHYSICS_RATE_MAX_HZ:g} Hz, got {fl.physics_rate_hz:g}")
+    _check_spacing(cfg)
     _check(len(fl.avoid_altitudes_m) >= 1, "flight.avoid_altitudes_m", "needs at least one layer")
     for i, alt in enumerate(fl.avoid_altitudes_m):
         _check(alt > fl.transit_altitude_m, f"flight.avoid_altitudes_m[{i}]",
@@ -301,6 +343,8 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{where}: must be a finite number, got {value!r}")
         return float(value)
     if tp is str:
         if not isinstance(value, str):
@@ -329,7 +373,7 @@ def _build(cls: type, data: Any, where: str) -> Any:
         raise ConfigError(f"{where or 'config'}: expected a mapping, got {data!r}")
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
+    unknown = sorted((k for k in data if k not in names), key=str)
     if unknown:
         prefix = f"{where}." if where else ""
         raise ConfigError(f"{prefix}{unknown[0]}: unknown key (known: {', '.join(sorted(names))})")
@@ -383,19 +427,23 @@ def to_dict(cfg: Any) -> dict[str, Any]:
     return conv(cfg)
 
 
-def _set_dotted(data: dict[str, Any], key: str, value: Any) -> None:
+def _set_dotted(data: dict[str, Any], key: str, value: Any, prefix: str = "") -> None:
+    """Set ``key`` (dotted, below ``prefix``) of ``data`` to ``value``; a dict value sets the
+    section's keys one by one. Errors name the full dotted key."""
+    if not isinstance(key, str):
+        raise ConfigError(f"{prefix}{key!r}: unknown key (keys are names)")
     parts = key.split(".")
     node = data
     for i, part in enumerate(parts[:-1]):
         if part not in node or not isinstance(node[part], dict):
-            raise ConfigError(f"{'.'.join(parts[: i + 1])}: unknown config section")
+            raise ConfigError(f"{prefix}{'.'.join(parts[: i + 1])}: unknown config section")
         node = node[part]
     last = parts[-1]
     if isinstance(value, dict) and isinstance(node.get(last), dict):
         for sub_key, sub_value in value.items():
-            _set_dotted(node[last], sub_key, sub_value)
+            _set_dotted(node[last], sub_key, sub_value, f"{prefix}{key}.")
     elif last not in node:
-        raise ConfigError(f"{key}: unknown key")
+        raise ConfigError(f"{prefix}{key}: unknown key")
     else:
         node[last] = to_dict(value) if dataclasses.is_dataclass(value) else value
 

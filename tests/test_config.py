@@ -1,5 +1,6 @@
 """Every shipped YAML loads; broken configs fail at load with the field named."""
 
+import re
 from pathlib import Path
 
 import pytest
@@ -96,3 +97,49 @@ def test_readme_lists_every_shipped_config():
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     for path in ALL_CONFIGS:
         assert f"| `{path.stem}` |" in readme, f"README.md does not list configs/env/{path.name}"
+
+
+@pytest.mark.parametrize("override, field", [
+    ({"flight.cruise_speed_mps": float("inf")}, "flight.cruise_speed_mps"),
+    ({"flight.flight_seconds_per_step": float("inf")}, "flight.flight_seconds_per_step"),
+    ({"uncertainty.position_noise_mean_m": float("nan")}, "uncertainty.position_noise_mean_m"),
+    ({"reward.term_magnitude": float("inf")}, "reward.term_magnitude"),
+    ({"battery.charge_pct": float("-inf")}, "battery.charge_pct"),
+])
+def test_non_finite_numbers_are_refused_naming_the_field(override, field):
+    with pytest.raises(ConfigError, match=f"^{re.escape(field)}: must be a finite number"):
+        load_config("paper", **override)
+
+
+def test_physics_rate_floor_ceiling_and_flag():
+    with pytest.raises(ConfigError, match=r"^flight\.physics_rate_hz: must be >= 45 Hz .*allow_low"):
+        load_config("paper", **{"flight.physics_rate_hz": 10})
+    assert load_config("paper", **{"flight.physics_rate_hz": 10,
+                                    "flight.allow_low_physics_rate": True}).flight.physics_rate_hz == 10
+    with pytest.raises(ConfigError, match=r"^flight\.physics_rate_hz: must be <= 2000 Hz"):
+        load_config("paper", **{"flight.physics_rate_hz": 1e9})
+
+
+@pytest.mark.parametrize("override, field, words", [
+    ({"layout.normal_ports_xy_m": [[-6.0, 0.0], [-5.5, 0.0]]}, "layout.normal_ports_xy_m[1]",
+     "is 0.5 m from layout.normal_ports_xy_m[0]"),
+    ({"layout.charging_ports_xy_m": [[6.0, 1.0]]}, "layout.charging_ports_xy_m[0]",
+     "is 1 m from layout.normal_ports_xy_m[1]"),
+    ({"layout.hover_spots_xy_m": [[10.0, 0.0], [10.0, 0.0]]}, "layout.hover_spots_xy_m[1]",
+     "is 0 m from layout.hover_spots_xy_m[0]"),
+    ({"layout.hover_ring_count": 40}, "layout.hover_ring_radius_m", "40 spots on a ring of 12 m"),
+])
+def test_pads_and_hover_spots_keep_a_vehicle_size_plus_the_separation(override, field, words):
+    with pytest.raises(ConfigError, match=f"^{re.escape(field)}: {re.escape(words)}.*4 m"):
+        load_config("paper", **override)
+
+
+def test_unknown_keys_of_mixed_types_and_in_a_section_dict_are_named(tmp_path):
+    path = tmp_path / "mixed.yaml"
+    path.write_text("base: paper\n1: x\nfoo: y\n")
+    with pytest.raises(ConfigError, match=r"1: unknown key"):
+        load_config(path)
+    with pytest.raises(ConfigError, match=r"^uncertainty\.wind_gust_probb: unknown key"):
+        load_config("paper").replace(uncertainty={"wind_gust_probb": 0.1})
+    with pytest.raises(ConfigError, match=r"^uncertainty\.wind_gust_probb: unknown key"):
+        load_config("paper", uncertainty={"wind_gust_probb": 0.1})

@@ -8,8 +8,8 @@ from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import ARRIVING, HOVERING, TAXIING
 
-# Four hover spots on the axes, 10-12 m from the centre; two vehicles.
-SPOTS = [[-10.0, 0.0], [10.0, 0.0], [0.0, -10.0], [0.0, 10.0], [12.0, 0.0], [-12.0, 0.0]]
+# Six hover spots on the axes, 10-14 m from the centre (at least 4 m apart); two vehicles.
+SPOTS = [[-10.0, 0.0], [10.0, 0.0], [0.0, -10.0], [0.0, 10.0], [14.0, 0.0], [-14.0, 0.0]]
 
 
 def make_sim(**overrides) -> VertiportSim:
@@ -98,8 +98,8 @@ def test_head_on_meeting_is_a_contact_measured_by_the_engine():
     sim = make_sim()
     hover_at(sim, 0, 0)  # (-10, 0)
     hover_at(sim, 1, 1)  # (10, 0)
-    sim.step(spot_action(sim, 4))  # A -> (12, 0)
-    sim.step(spot_action(sim, 5))  # B -> (-12, 0): the same line, opposite directions
+    sim.step(spot_action(sim, 4))  # A -> (14, 0)
+    sim.step(spot_action(sim, 5))  # B -> (-14, 0): the same line, opposite directions
     carry_on(sim, 30)
     assert sim.metrics.contacts >= 1
     assert sim.metrics.separation_losses >= 1
