@@ -425,3 +425,41 @@ def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):
     alg.updates_done, alg.critic_warmup_updates = 5, 3  # resumed past the warm-up: untouched
     alg.update()
     assert seen[-1] is True
+
+
+def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path, capsys):
+    """A pickle whose loading would create a file, handed to evaluation, rendering, a resumed
+    run and a resumed warm start: each refuses it with a one-line error; the file never exists."""
+    from agents.evaluate import main as evaluate_main
+    from agents.gcn.train.pipeline import main as train_main
+    from agents.render import main as render_main
+
+    marker = tmp_path / "ran"
+    hostile = {"actor_state_dict": {}, "critic_state_dict": {}, "optimizer_state_dict": {},
+               "iter": 1, "infos": _RunsCode(str(marker))}
+    evil = tmp_path / "evil.pt"
+    torch.save(hostile, evil)
+
+    assert evaluate_main(["--agents", str(evil), "--episodes", "1", "--out", str(tmp_path / "e")]) == 2
+    assert "corrupt or not a torch file" in capsys.readouterr().err
+    assert render_main(["--agent", str(evil), "--minutes", "2", "--out", str(tmp_path / "r.gif")]) == 2
+    assert "corrupt or not a torch file" in capsys.readouterr().err
+
+    # A real run's last checkpoint replaced by the hostile file, then resumed.
+    run = tmp_path / "run"
+    train(tiny_config("single_agent", iterations=1, env_config="small"), run,
+          log=lambda *_: None, evaluate=False)
+    (last,) = sorted(run.glob("model_*.pt"))[-1:]
+    torch.save(hostile, last)
+    assert train_main(["--resume", str(run), "--no-eval"]) == 2
+    err = capsys.readouterr().err
+    assert f"checkpoint {last} cannot be loaded into this run" in err and len(err.strip().splitlines()) == 1
+
+    # A hostile warm-start progress file (what a run stopped during its warm start resumes from;
+    # test_run_killed_during_the_warm_start_resumes_it goes through that path).
+    from agents.gcn.train.imitation import load_warm_start_state
+
+    torch.save({"next_round": 1, "data": _RunsCode(str(marker))}, run / "warmstart_state.pt")
+    with pytest.raises(ValueError, match="not a readable warm-start state.*tensors and plain data only"):
+        load_warm_start_state(run / "warmstart_state.pt")
+    assert not marker.exists()

@@ -385,19 +385,29 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
 
 
 def save_warm_start_state(path: Path, state: dict[str, Any]) -> None:
-    """Write the warm start's progress atomically (see :func:`warm_start`)."""
+    """Write the warm start's progress atomically (see :func:`warm_start`), as tensors and
+    plain data only, so that :func:`load_warm_start_state` reads it without unpickling code."""
+    data = state.get("data")
+    if isinstance(data, dict):
+        data = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in data.items()}
     buf = io.BytesIO()
-    torch.save({**state, "torch_rng": torch.get_rng_state()}, buf)
+    torch.save({**state, "data": data, "torch_rng": torch.get_rng_state()}, buf)
     write_atomic(path, buf.getvalue())
 
 
 def load_warm_start_state(path: Path) -> dict[str, Any]:
-    """Read a warm start's progress; a file that is not one raises ``ValueError`` naming it."""
+    """Read a warm start's progress; a file that is not one raises ``ValueError`` naming it.
+
+    Loaded with ``weights_only=True``: tensors and plain data only, so a file that carries
+    pickled code is refused and the code is never run."""
     try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # truncated or foreign file
-        raise ValueError(f"{path}: not a readable warm-start state ({type(exc).__name__}: {exc}); "
-                         f"delete it to redo the warm start") from exc
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated, foreign, or carrying more than tensors and plain data
+        raise ValueError(f"{path}: not a readable warm-start state ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''}); files are loaded as "
+                         f"tensors and plain data only; delete it to redo the warm start") from None
+    if isinstance(state, dict) and isinstance(state.get("data"), dict):
+        state["data"] = {k: v.numpy() for k, v in state["data"].items()}
     missing = {"next_round", "data", "fits", "scores", "stats", "records", "env_steps",
                "made_with", "torch_rng"} - set(state if isinstance(state, dict) else ())
     if missing:

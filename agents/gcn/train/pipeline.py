@@ -20,6 +20,7 @@ import csv
 import io
 import math
 import os
+import pickle
 import re
 import sys
 import time
@@ -261,6 +262,15 @@ def _make_runner_class():
             tmp = f"{path}.tmp"
             super().save(tmp, {**self.checkpoint_infos, **(infos or {})})
             os.replace(tmp, path)
+
+        def load(self, path: str, load_cfg: dict | None = None, strict: bool = True,
+                 map_location: str | None = None) -> dict:
+            """``OnPolicyRunner.load`` with ``weights_only=True``: tensors and plain data only,
+            so a checkpoint that carries pickled code is refused, never run."""
+            loaded = torch.load(path, weights_only=True, map_location=map_location)
+            if self.alg.load(loaded, load_cfg, strict):
+                self.current_learning_iteration = loaded["iter"]
+            return loaded["infos"]
 
     return AtomicRunner
 
@@ -531,11 +541,13 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
 
 
 def load_checkpoint_into(runner, path: Path) -> None:
-    """Load a checkpoint into a runner, with a clear error when it does not fit."""
+    """Load a checkpoint into a runner (tensors and plain data only), with a one-line error
+    when it does not fit or is not one."""
     try:
         runner.load(str(path), map_location=runner.device)
-    except (RuntimeError, KeyError, EOFError, OSError) as exc:
-        raise ValueError(f"checkpoint {path} cannot be loaded into this run: {exc}") from exc
+    except (RuntimeError, KeyError, EOFError, OSError, pickle.UnpicklingError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(f"checkpoint {path} cannot be loaded into this run: {first}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
