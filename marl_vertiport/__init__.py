@@ -20,7 +20,10 @@ __all__ = ["ConfigError", "EnvConfig", "IllegalActionError", "closest_approach",
 __version__ = "0.1.0"
 
 if "marl_vertiport/Vertiport-v0" not in gymnasium.registry:
-    gymnasium.register(id="marl_vertiport/Vertiport-v0", entry_point="marl_vertiport.gym_env:VertiportEnv")
+    # No order-enforcing or checker wrappers: gymnasium's wrappers do not forward the env's own
+    # methods (state(), action_masks()), and the env enforces the order itself.
+    gymnasium.register(id="marl_vertiport/Vertiport-v0", entry_point="marl_vertiport.gym_env:VertiportEnv",
+                       order_enforce=False, disable_env_checker=True)
 
 
 def __getattr__(name: str):

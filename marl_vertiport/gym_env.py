@@ -53,6 +53,7 @@ class VertiportEnv(gym.Env):
         world = make_world(config, render_mode, self.metadata["render_modes"], **overrides)
         self.config, self.sim, self._builder = world.config, world.sim, world.builder
         self.render_mode = render_mode
+        self._started = False
         self.observation_space = self._builder.observation_space
         # sample() draws among the legal actions of the acting eVTOL (see LegalDiscrete).
         self.action_space = LegalDiscrete(self.sim.actions.n, self.action_masks)
@@ -64,9 +65,15 @@ class VertiportEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self.sim.reset(self.np_random)
+        self._started = True
         return self._builder.observe(self.sim.acting), self._info({})
 
     def step(self, action: Any):
+        if not self._started:
+            raise RuntimeError("reset() must be called before step()")
+        if self.sim.truncated:
+            raise RuntimeError(f"the episode ended (truncated after {self.sim.step_count} steps); "
+                               "call reset() to start another")
         reward, info = self.sim.step(action)
         truncated = self.sim.truncated
         info = self._info(info)
@@ -75,7 +82,9 @@ class VertiportEnv(gym.Env):
         return self._builder.observe(self.sim.acting), reward, False, truncated, info
 
     def state(self) -> dict:
-        """Global noise-free graph, as the AEC env's ``state()``."""
+        """Global noise-free graph, as the AEC env's ``state()`` (after ``reset()``)."""
+        if not self._started:
+            raise RuntimeError("reset() must be called before state()")
         return self._builder.state()
 
     def action_masks(self) -> np.ndarray:

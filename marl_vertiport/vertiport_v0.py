@@ -128,9 +128,16 @@ class raw_env(AECEnv):
         self._last_rewarded: str | None = None
 
     def observe(self, agent: str) -> dict:
-        return self._builder.observe(self.agent_name_mapping[agent])
+        v = self.agent_name_mapping.get(agent)
+        if v is None:
+            raise KeyError(f"unknown agent {agent!r}; the agents are {', '.join(self.possible_agents)}")
+        if self._rng is None:
+            raise RuntimeError("reset() must be called before observe()")
+        return self._builder.observe(v)
 
     def state(self) -> dict:
+        if self._rng is None:
+            raise RuntimeError("reset() must be called before state()")
         return self._builder.state()
 
     def step(self, action: Any) -> None:

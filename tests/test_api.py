@@ -117,3 +117,34 @@ def test_last_through_the_wrapper_is_the_raw_envs_last():
         legal = np.flatnonzero(got[0]["action_mask"])
         env.step(int(rng.choice(legal)))
     env.close()
+
+
+def test_api_edges_get_clear_errors():
+    """Before reset, an unknown agent id, a step after truncation, and state() through
+    gymnasium.make: each either works as documented or says what to do."""
+    import gymnasium
+
+    from marl_vertiport.vertiport_v0 import raw_env
+
+    raw = raw_env(config="small")
+    for call in (raw.state, lambda: raw.observe("evtol_0")):
+        with pytest.raises(RuntimeError, match=r"reset\(\) must be called before"):
+            call()
+    raw.reset(seed=0)
+    with pytest.raises(KeyError, match="unknown agent 'evtl_0'; the agents are evtol_0, evtol_1, evtol_2"):
+        raw.observe("evtl_0")
+    raw.close()
+
+    env = gymnasium.make("marl_vertiport/Vertiport-v0", config="small", schedule__episode_steps=2)
+    with pytest.raises(RuntimeError, match=r"reset\(\) must be called before state"):
+        env.state()
+    env.reset(seed=0)
+    assert set(env.state()) == {"port_nodes", "evtol_nodes", "clock"}
+    truncated = False
+    while not truncated:
+        *_, truncated, _ = env.step(int(np.flatnonzero(env.action_masks())[0]))
+    minute = env.unwrapped.sim.minute
+    with pytest.raises(RuntimeError, match=r"episode ended \(truncated after 2 steps\); call reset"):
+        env.step(0)
+    assert env.unwrapped.sim.minute == minute  # nothing simulated after the end
+    env.close()
