@@ -45,6 +45,21 @@ class FirstLegal(Controller):
         return int(np.flatnonzero(observation["action_mask"])[0])
 
 
+class CrashesOnTurnThree(Controller):
+    """Raises from its own code on its third decision of a day."""
+
+    name = "crashes"
+
+    def reset(self, seed=None) -> None:
+        self.turns = 0
+
+    def act(self, observation: dict) -> int:
+        self.turns += 1
+        if self.turns == 3:
+            return self.turns // 0  # the crash
+        return int(np.flatnonzero(observation["action_mask"])[0])
+
+
 class IllegalAfterK(Controller):
     """Legal for the first ``K`` calls made in this process (counted over all instances), then
     an out-of-range action. With STEPS-step days, the first day completes and the second fails."""
@@ -371,3 +386,29 @@ def test_agent_arguments_reach_the_worker_processes(tmp_path):
     assert _run(tmp_path, agents=("heuristic", "heuristic[holding=false]"), workers=2) == 0
     agents = {r["agent"] for r in _rows(tmp_path / "episodes.csv")}
     assert agents == {"heuristic", "heuristic[holding=false]"}
+
+
+def test_a_crashing_controller_is_reported_with_its_file_and_line(tmp_path, capsys):
+    spec = "tests.test_evaluate:CrashesOnTurnThree"
+    assert _run(tmp_path / "out", agents=[spec]) == 1
+    err = capsys.readouterr().err
+    line = next(i for i, text in enumerate(Path(__file__).read_text().splitlines(), 1)
+                if "return self.turns // 0" in text)
+    assert "ZeroDivisionError: integer division or modulo by zero" in err
+    assert f"raised at tests/test_evaluate.py:{line} in act" in err
+
+
+@pytest.mark.parametrize("out, report, words", [
+    ("a_file", None, "exists and is not a folder"),
+    ("a_file/sub", None, "is not a folder"),
+    ("out", ".", "is a folder; give a file name"),
+])
+def test_bad_outputs_are_refused_before_any_episode_runs(tmp_path, capsys, out, report, words):
+    (tmp_path / "a_file").write_text("keep me")
+    argv = ["--agents", "random", "--episodes", "1", "--out", str(tmp_path / out), *TINY]
+    if report is not None:
+        argv += ["--report", str(tmp_path / report)]
+    assert ev.main(argv) == 2
+    err = capsys.readouterr().err
+    assert words in err and "episodes in" not in err  # refused up front, nothing ran
+    assert (tmp_path / "a_file").read_text() == "keep me"

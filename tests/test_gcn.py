@@ -2,6 +2,7 @@
 checkpoints, and the parity of the multi-agent and single-agent paths."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -14,6 +15,7 @@ from tensordict import TensorDict
 
 from agents.gcn.distribution import MaskedCategorical
 from agents.gcn.models import GraphActor, GraphCritic
+from agents.controllers.registry import SHIPPED_CHECKPOINT
 from agents.gcn.policy import CheckpointError, GCNController
 from agents.gcn.train.pipeline import (
     TrainConfig, TrainingDiverged, feature_names, latest_checkpoint, runner_config, train,
@@ -463,3 +465,18 @@ def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path,
     with pytest.raises(ValueError, match="not a readable warm-start state.*tensors and plain data only"):
         load_warm_start_state(run / "warmstart_state.pt")
     assert not marker.exists()
+
+
+def test_checkpoint_with_non_finite_weights_is_refused_naming_the_weight(tmp_path):
+    data = torch.load(SHIPPED_CHECKPOINT, weights_only=True)
+    name = sorted(data["actor_state_dict"])[3]
+    data["actor_state_dict"][name] = data["actor_state_dict"][name].clone().fill_(float("nan"))
+    torch.save(data, tmp_path / "nan.pt")
+    with pytest.raises(CheckpointError, match=f"weight '{re.escape(name)}' has NaN or infinite"):
+        GCNController(tmp_path / "nan.pt")
+    data = torch.load(SHIPPED_CHECKPOINT, weights_only=True)
+    data["actor_state_dict"].pop(name)
+    torch.save(data, tmp_path / "short.pt")
+    with pytest.raises(CheckpointError, match="do not fit the GCN actor") as exc:
+        GCNController(tmp_path / "short.pt")
+    assert "\n" not in str(exc.value)

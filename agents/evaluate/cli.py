@@ -84,6 +84,37 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _writable_folder(path: Path) -> str | None:
+    """Why files could not be written into folder ``path`` (created where missing), or None.
+    Creates nothing."""
+    if path.exists():
+        if not path.is_dir():
+            return "exists and is not a folder"
+        return None if os.access(path, os.W_OK | os.X_OK) else "the folder is not writable"
+    ancestor = path.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        return f"cannot be created: {ancestor} is not a folder"
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        return f"cannot be created: {ancestor} is not writable"
+    return None
+
+
+def check_outputs(out: Path, report: Path | None) -> None:
+    """Fail before any episode runs when the results could not be written: ``out`` is a file
+    or cannot be created, or ``report`` is a folder or cannot be written. Creates nothing."""
+    problem = _writable_folder(out)
+    if problem:
+        raise InputError(f"--out {out}: {problem}")
+    if report is not None:
+        if report.is_dir():
+            raise InputError(f"--report {report}: is a folder; give a file name such as report.md")
+        problem = _writable_folder(report.parent)
+        if problem:
+            raise InputError(f"--report {report}: its folder {report.parent} {problem}")
+
+
 def _unique(items: Iterable[str]) -> tuple[str, ...]:
     return tuple(dict.fromkeys(items))
 
@@ -119,6 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                 bootstrap=args.bootstrap, bootstrap_seed=args.bootstrap_seed)
         if args.workers < 1:
             raise InputError(f"--workers must be >= 1, got {args.workers}")
+        check_outputs(args.out, args.report)
         names = validate(settings)
     except InputError as exc:
         close_envs()

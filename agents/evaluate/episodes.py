@@ -9,6 +9,8 @@ import multiprocessing
 import signal
 import sys
 import time
+import traceback
+from pathlib import Path
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from typing import Any, Callable, Iterable, Sequence
 
@@ -60,6 +62,21 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def raised_at(exc: BaseException) -> str:
+    """``raised at FILE:LINE in FUNCTION`` of the innermost frame of ``exc``'s traceback (the
+    file relative to the working directory when it lies below it)."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    if not frames:
+        return "raised at an unknown place"
+    last = frames[-1]
+    path = Path(last.filename)
+    try:
+        path = path.resolve().relative_to(Path.cwd())
+    except ValueError:
+        pass
+    return f"raised at {path}:{last.lineno} in {last.name}"
+
+
 def run_task(task: EpisodeTask) -> EpisodeRecord:
     """Run one episode with a fresh controller; errors come back in the record, not raised."""
     start = time.perf_counter()
@@ -69,8 +86,11 @@ def run_task(task: EpisodeTask) -> EpisodeRecord:
         metrics = run_aec_episode(env, controller, seed=task.seed)
     except Exception as exc:  # an illegal action (ValueError), or a controller that crashed
         _drop_env(task.config, task.overrides)  # the env stopped mid-episode
-        kind = "" if isinstance(exc, ValueError) else f"{type(exc).__name__}: "
-        return EpisodeRecord(task, error=f"{kind}{exc}", seconds=time.perf_counter() - start)
+        if isinstance(exc, ValueError):
+            error = str(exc)
+        else:
+            error = f"{type(exc).__name__}: {exc} ({raised_at(exc)})"
+        return EpisodeRecord(task, error=error, seconds=time.perf_counter() - start)
     plain = {k: _plain(v) for k, v in metrics.items()}
     return EpisodeRecord(task, metrics=plain, seconds=time.perf_counter() - start)
 

@@ -35,12 +35,27 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # truncated or foreign file: torch raises many kinds
         raise CheckpointError(f"checkpoint {path} is corrupt or not a torch file "
-                              f"({type(exc).__name__}: {exc})") from exc
+                              f"({type(exc).__name__}: {_first_line(exc)})") from None
     meta = (data.get("infos") or {}).get("marl_vertiport") if isinstance(data, dict) else None
     if meta is None or "actor_state_dict" not in data:
         raise CheckpointError(f"checkpoint {path} is not a marl_vertiport training checkpoint "
                               "(no actor weights or run metadata)")
     return data
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def check_weights(path: Path | str, state_dict: dict[str, Any]) -> None:
+    """Refuse weights that are not all finite tensors, naming the first bad one."""
+    for name, value in state_dict.items():
+        if not isinstance(value, torch.Tensor):
+            raise CheckpointError(f"checkpoint {path}: weight {name!r} is not a tensor")
+        if value.is_floating_point() and not torch.isfinite(value).all():
+            raise CheckpointError(f"checkpoint {path}: weight {name!r} has NaN or infinite "
+                                  "values (a diverged run?)")
 
 
 class GCNController(Controller):
@@ -86,11 +101,12 @@ class GCNController(Controller):
         groups = {"actor": list(POLICY_GROUPS)}
         self.actor = GraphActor(example, groups, "actor", 1, feature_names("observation"),
                                 hidden=model["hidden"], hidden_dims=model["hidden_dims"])
+        check_weights(self.path, data["actor_state_dict"])
         try:
             self.actor.load_state_dict(data["actor_state_dict"])
-        except RuntimeError as exc:
+        except RuntimeError as exc:  # torch lists every mismatch over many lines; the first says it
             raise CheckpointError(f"checkpoint {self.path}: its weights do not fit the GCN actor "
-                                  f"for this env ({exc})") from exc
+                                  f"({_first_line(exc)})") from None
         self.actor.eval()
         self.deterministic = deterministic
         self.generator = torch.Generator().manual_seed(seed or 0)
