@@ -6,7 +6,7 @@ import pytest
 
 from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import VertiportSim
-from marl_vertiport.sim.schema import ARRIVING, HOVERING, TAXIING
+from marl_vertiport.sim.schema import ARRIVING, AWAY, HOVERING, OUT_OF_SERVICE, TAXIING
 
 # Six hover spots on the axes, 10-14 m from the centre (at least 4 m apart); two vehicles.
 SPOTS = [[-10.0, 0.0], [10.0, 0.0], [0.0, -10.0], [0.0, 10.0], [14.0, 0.0], [-14.0, 0.0]]
@@ -165,3 +165,50 @@ def test_copies_get_their_own_physics_world():
         ob, rb, *_ = b.step(action)
         assert ra == rb
         np.testing.assert_array_equal(oa["observation"]["evtol_nodes"], ob["observation"]["evtol_nodes"])
+
+
+def test_a_reversing_gust_never_pushes_a_climbing_vehicle_below_its_pad():
+    """Every vehicle hit by a full reversal (u = 2) on every step: one taking off is pushed back
+    down to its pad at most (a regression: it used to end about 1.85 m under the ground)."""
+    from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
+
+    cfg = load_config("paper", **{"uncertainty.wind_gust_prob": 1.0,
+                                  "uncertainty.gust_speed_loss_range": [2.0, 2.0],
+                                  "atc.energy_check": False})
+    sim = VertiportSim(cfg)
+    sim.reset(np.random.default_rng(0))
+    took_off = 0
+    for _ in range(40):
+        v = sim.acting
+        on_ground = sim.status[v] in (ON_PORT, ON_CHARGER)
+        action = sim.actions.takeoff if on_ground and sim.action_mask(v)[sim.actions.takeoff] else (
+            sim.actions.continue_ if sim.action_mask(v)[sim.actions.continue_] else sim.actions.stay)
+        took_off += action == sim.actions.takeoff
+        sim.step(action)
+        inside = sim.status != AWAY
+        assert (sim.pos[inside, 2] >= sim.park_z_m - 1e-9).all(), sim.pos[inside, 2]
+    assert took_off >= 2
+
+
+def test_an_emergency_landing_comes_down_beside_a_vehicle_on_the_ground_not_on_it():
+    cfg = load_config("paper", **{"atc.energy_check": False})
+    sim = VertiportSim(cfg)
+    sim.reset(np.random.default_rng(0))
+    v = sim.acting
+    u = (v + 1) % sim.n
+    xy = sim.layout.node_xy_m[sim.layout.n_ports]  # above the first hover spot
+    for w in (u, v):  # both over the same point, at the hover altitude
+        sim._release(w)
+        sim.status[w] = HOVERING
+        sim.has_target[w] = False
+        sim.routes[w] = []
+        sim.pos[w] = (xy[0], xy[1], cfg.flight.hover_altitude_m)
+        sim.physics.make_static(w, sim.pos[w])
+    sim._take_out_of_service(u)  # u comes down straight below
+    np.testing.assert_allclose(sim.pos[u], (xy[0], xy[1], sim.park_z_m))
+    sim.battery[v] = 1.0
+    sim._mask_cache, sim._evtol_cache = {}, None
+    sim.step(sim.actions.stay)  # one more minute of hovering empties v's battery
+    assert sim.status[v] == OUT_OF_SERVICE and sim.pos[v, 2] == sim.park_z_m
+    assert np.linalg.norm(sim.pos[v, :2] - sim.pos[u, :2]) >= sim._touch_m  # beside, not inside
+    assert np.hypot(*sim.pos[v, :2]) < cfg.layout.airspace_radius_m

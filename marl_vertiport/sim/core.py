@@ -560,6 +560,10 @@ class VertiportSim:
             vel = (dx * scale, dy * scale, dz * scale)
             cmd_vel[v] = vel
             f = 1.0 if keep is None else keep[k]
+            if f < 0.0 and vel[2] > 0.0 and pz + vel[2] * dt * f < self.park_z_m:
+                # The ground stops a reversing gust: a vehicle climbing from its pad is pushed
+                # back down to the pad at most, never below it.
+                f = (self.park_z_m - pz) / (vel[2] * dt)
             if status[v] == AWAY:
                 nx, ny, nz = px + vel[0] * dt * f, py + vel[1] * dt * f, pz + vel[2] * dt * f
                 r = math.hypot(nx, ny)
@@ -781,7 +785,8 @@ class VertiportSim:
     def _take_out_of_service(self, v: int) -> None:
         """Battery depleted in the air: emergency landing where it is, out of service for the
         rest of the day. If it comes down within two vehicle sizes of a free port it takes the
-        nearest such port, so nothing lands on top of it. A late
+        nearest such port, so nothing lands on top of it; it never comes down on or inside a
+        vehicle on the ground (:meth:`_clear_landing_xy`). A late
         operation it leaves undone keeps its lateness (at the end of this step) in the metrics."""
         if self.pending_kind[v] != NO_OPERATION:
             self.completed_delay[v] += self.schedule.lateness_min(
@@ -801,7 +806,32 @@ class VertiportSim:
                                   & (self.node_occupant == -1))
             if near.size:
                 self._occupy(v, int(near[np.argmin(d[near])]))
+            self.pos[v, :2] = self._clear_landing_xy(v)
             self.physics.make_static(v, self.pos[v])
+
+    def _clear_landing_xy(self, v: int) -> np.ndarray:
+        """Where vehicle ``v`` comes down in an emergency landing: straight below it, or, when
+        that would put it within touching distance of a vehicle on the ground, the nearest point
+        clear of all of them (on rings of one touching distance around it, 12 bearings each,
+        inside the airspace), so that it never lands on or inside another vehicle."""
+        here = self.pos[v, :2].copy()
+        grounded = [u for u in range(self.n) if u != v and self.pos[u, 2] <= self.park_z_m + 1e-6
+                    and self.status[u] != AWAY]
+        if not grounded:
+            return here
+        others = self.pos[grounded, :2]
+        clear = self._touch_m
+        if np.linalg.norm(others - here, axis=1).min() >= clear:
+            return here
+        radius = self.layout.airspace_radius_m
+        bearings = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+        for ring in range(1, 4 * self.n + 2):
+            points = here + ring * clear * np.column_stack([np.cos(bearings), np.sin(bearings)])
+            ok = (np.linalg.norm(points[:, None] - others[None], axis=2).min(axis=1) >= clear) \
+                & (np.linalg.norm(points, axis=1) < radius)
+            if ok.any():
+                return points[np.flatnonzero(ok)[0]]
+        return here  # pragma: no cover - a full airspace; cannot happen with a valid layout
 
     def _update_delays(self) -> None:
         """Minutes since each pending operation's time, and the delay (that lateness beyond the
