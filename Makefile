@@ -16,7 +16,7 @@ CONFIGS  ?= paper paper_uncertain
 OUT      ?= runs/eval
 AGENT    ?= heuristic
 
-.PHONY: help venv test test-fast fuzz train evaluate results render bench env-demo clean
+.PHONY: help venv test test-fast fuzz soak train evaluate results render bench env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-10s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -39,6 +39,9 @@ test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward
 
 test-fast: $(STAMP)  ## the test suite without the full-episode tests
 	$(PY) -m pytest -q -m "not slow"
+
+soak: $(STAMP)  ## many days with every uncertainty high on six layouts: invariants after every step, memory (about 2 minutes)
+	$(CLI) soak --days 40
 
 fuzz: $(STAMP)  ## the property-based tests on many more examples (HYPOTHESIS_PROFILE=long, a few minutes)
 	HYPOTHESIS_PROFILE=long $(PY) -m pytest -q tests/test_properties.py

@@ -7,6 +7,7 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     render        an animated GIF or MP4 of one episode of a controller
     bench         the speed and memory benchmark (docs/performance.md)
     capacity      the charger study: where the charging ports' minutes go, vehicles lost
+    soak          many days with every uncertainty high: invariants after every step, memory
     demo          random legal actions for a few episodes, with steps per second
     info          spaces, feature columns and action names of an env config
     check-config  validate an env config and print it resolved
@@ -29,6 +30,7 @@ COMMANDS = {
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),
     "capacity": ("agents.studies.capacity", "the charger study"),
+    "soak": ("agents.studies.soak", "many days with high uncertainty: invariants and memory"),
     "demo": ("marl_vertiport.cli", "random legal actions for a few episodes"),
     "info": ("marl_vertiport.cli", "spaces, features and action names of a config"),
     "check-config": ("marl_vertiport.cli", "validate an env config and print it resolved"),

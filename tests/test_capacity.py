@@ -25,3 +25,13 @@ def test_training_seeds_and_bad_fleets_are_refused(capsys):
     assert "training seeds" in capsys.readouterr().err
     assert main(["--fleet", "0", "--seeds", "800000:800001"]) == 2
     assert "fleet" in capsys.readouterr().err
+
+
+def test_soak_runs_checks_and_reports_what_it_covered(capsys):
+    from agents.studies.soak import main
+
+    assert main(["--days", "2", "--configs", "small", "paper"]) == 0
+    out = capsys.readouterr().out
+    assert "soak: 4 days (2 per layout: small (3 eVTOLs), paper (4 eVTOLs))" in out
+    assert "invariants: all held" in out and "gusts" in out and "RSS" in out
+    assert main(["--days", "1"]) == 2

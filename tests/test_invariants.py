@@ -156,3 +156,21 @@ def test_episode_summary_has_exactly_the_registered_metrics_in_order():
     assert set(DIRECTION) <= set(METRICS) and all(v in (-1, 1) for v in DIRECTION.values())
     assert LOGGED_METRICS == TRAINING_METRICS == CURVE_KEYS[-len(TRAINING_METRICS):]
     assert {"total_reward", "stranded", "collisions"} <= set(TRAINING_METRICS)
+
+
+def test_the_invariant_checker_sees_each_kind_of_breakage():
+    import numpy as np
+
+    from marl_vertiport.config import load_config
+    from marl_vertiport.sim.core import VertiportSim
+    from marl_vertiport.sim.invariants import violations
+
+    sim = VertiportSim(load_config("paper"))
+    sim.reset(np.random.default_rng(0))
+    assert violations(sim, 1.0) == []
+    assert violations(sim, 7.5)[0].startswith("reward 7.5 outside")
+    sim.battery[0] = 101.0
+    sim.pos[1, 2] = -1.0
+    found = " | ".join(violations(sim))
+    assert "evtol_0: battery 101.0" in found and "evtol_1: below the ground" in found
+    sim.close()

@@ -19,19 +19,13 @@ from hypothesis import strategies as st
 
 from marl_vertiport.config import ConfigError, EnvConfig, load_config
 from marl_vertiport.sim.core import IllegalActionError, VertiportSim
-from marl_vertiport.sim.schema import AWAY
+from marl_vertiport.sim.invariants import violations
 
 settings.register_profile("default", max_examples=25, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("long", max_examples=1500, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
-
-#: The reward of a step lies within the sum of the weights times the term magnitude.
-DEFAULT = load_config("paper")
-REWARD_BOUND = DEFAULT.reward.term_magnitude * sum(
-    getattr(DEFAULT.reward, f"{k}_weight") for k in ("takeoff", "landing", "battery", "delay", "safety"))
-
 
 def schema_fields(cls: type = EnvConfig, prefix: str = "") -> list[tuple[str, typing.Any, typing.Any]]:
     """Every leaf of the schema: ``(dotted key, type, default)``, read from the dataclasses."""
@@ -78,27 +72,13 @@ def overrides(draw) -> dict[str, typing.Any]:
     return {key: draw(value_for(tp, default)) for key, tp, default in picked}
 
 
-def check_invariants(sim: VertiportSim, reward: float) -> None:
-    assert math.isfinite(reward) and abs(reward) <= REWARD_BOUND + 1e-9
-    assert ((sim.battery >= 0.0) & (sim.battery <= 100.0)).all()
-    inside = sim.status != AWAY
-    assert (sim.pos[inside, 2] >= sim.park_z_m - 1e-9).all(), "a vehicle below the ground"
-    nodes = sim.node[sim.node >= 0]
-    assert len(set(nodes.tolist())) == len(nodes), "two vehicles hold one port or hover spot"
-    for node, occupant in enumerate(sim.node_occupant.tolist()):
-        assert occupant == -1 or sim.node[occupant] == node
-    for v in range(sim.n):
-        mask = sim.action_mask(v)
-        assert mask.dtype == np.int8 and mask.any()
-
-
 def play(sim: VertiportSim, choices: list[int]) -> list:
     """Legal actions picked by ``choices`` (each an index into the legal ones); the trace."""
     trace = []
     for c in choices:
         legal = np.flatnonzero(sim.action_mask(sim.acting))
         reward, info = sim.step(int(legal[c % len(legal)]))
-        check_invariants(sim, reward)
+        assert not violations(sim, reward), violations(sim, reward)
         trace.append((reward, sim.pos.copy(), sim.battery.copy(), sim.status.copy()))
     return trace
 
