@@ -286,6 +286,10 @@ def _validate(cfg: EnvConfig) -> None:
                f"{fl.physics_rate_hz:g}; set flight.allow_low_physics_rate: true to go below it")
     _check(fl.physics_rate_hz <= PHYSICS_RATE_MAX_HZ, "flight.physics_rate_hz",
            f"must be <= {PHYSICS_RATE_MAX_HZ:g} Hz, got {fl.physics_rate_hz:g}")
+    for name in ("hover_altitude_m", "transit_altitude_m"):
+        _check(getattr(fl, name) > fl.vehicle_height_m, f"flight.{name}",
+               f"must be above the vehicle's height ({fl.vehicle_height_m:g} m), so that a vehicle "
+               f"there is off the ground; got {getattr(fl, name):g}")
     _check_spacing(cfg)
     _check(len(fl.avoid_altitudes_m) >= 1, "flight.avoid_altitudes_m", "needs at least one layer")
     for i, alt in enumerate(fl.avoid_altitudes_m):

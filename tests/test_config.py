@@ -143,3 +143,11 @@ def test_unknown_keys_of_mixed_types_and_in_a_section_dict_are_named(tmp_path):
         load_config("paper").replace(uncertainty={"wind_gust_probb": 0.1})
     with pytest.raises(ConfigError, match=r"^uncertainty\.wind_gust_probb: unknown key"):
         load_config("paper", uncertainty={"wind_gust_probb": 0.1})
+
+
+def test_hover_and_transit_altitudes_must_be_off_the_ground():
+    """Found by make fuzz: a 0.125 m hover altitude put hovering vehicles under a parked one's
+    height."""
+    for key in ("flight.hover_altitude_m", "flight.transit_altitude_m"):
+        with pytest.raises(ConfigError, match=f"^{re.escape(key)}: must be above the vehicle's height"):
+            load_config("paper", **{key: 0.125})

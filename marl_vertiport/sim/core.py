@@ -171,6 +171,7 @@ class VertiportSim:
                 self.pending_time[v] = self.schedule.first_landing_min()
             self.dest[v] = dests[v]
         self.prev_pos[:] = self.pos
+        self.physics.forget_contacts()  # nothing of the previous day's contacts carries over
         self._update_delays()
         self._refresh_conflicts()
         self.metrics = EpisodeMetrics(action_counts=np.zeros(self.actions.n, dtype=np.int64))

@@ -150,28 +150,51 @@ class FlightPhysics:
         self.set_body_states(state["bodies"])
         self.engine_seconds = state["engine_seconds"]
 
-    def body_states(self) -> list[tuple[str, tuple[float, float, float]]]:
-        """Each body's mode (``"dynamic"``, ``"static"`` or ``"absent"``) and position."""
+    def body_states(self) -> list[tuple[str, tuple[float, ...]]]:
+        """Each body's mode (``"dynamic"``, ``"static"`` or ``"absent"``) and pose: position
+        ``(x, y, z)`` then orientation quaternion ``(qx, qy, qz, qw)`` (a contact can tilt a
+        body)."""
         cid = self.client
         modes = ["dynamic" if d else "static" if c else "absent"
                  for d, c in zip(self._dynamic, self._colliding)]
-        return [(m, p.getBasePositionAndOrientation(b, physicsClientId=cid)[0])
-                for m, b in zip(modes, self.bodies)]
+        out = []
+        for m, b in zip(modes, self.bodies):
+            pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=cid)
+            out.append((m, tuple(pos) + tuple(orn)))
+        return out
 
-    def set_body_states(self, states: list[tuple[str, tuple[float, float, float]]]) -> None:
-        """Put every body in the mode and at the position of :meth:`body_states`."""
+    def set_body_states(self, states: list[tuple[str, tuple[float, ...]]]) -> None:
+        """Put every body in the mode and at the pose of :meth:`body_states` (a position alone
+        means upright), then drop the engine's cached contacts between bodies, so that a
+        restored world steps exactly as the one it was taken from."""
         if len(states) != len(self.bodies):
             raise ValueError(f"{len(states)} body states for {len(self.bodies)} vehicle bodies")
-        for i, (mode, pos) in enumerate(states):
+        for i, (mode, pose) in enumerate(states):
+            orn = tuple(pose[3:7]) if len(pose) >= 7 else (0.0, 0.0, 0.0, 1.0)
             if mode == "absent":
                 self.make_absent(i)
             elif mode == "dynamic":
-                self.make_dynamic(i, np.asarray(pos, dtype=float))
+                self.make_dynamic(i, np.asarray(pose[:3], dtype=float), orn)
             else:
-                self.make_static(i, np.asarray(pos, dtype=float))
+                self.make_static(i, np.asarray(pose[:3], dtype=float), orn)
+        self.forget_contacts()
+
+    def forget_contacts(self) -> None:
+        """Drop the engine's cached contacts between bodies. Contact manifolds persist in its
+        pair cache and warm-start its solver, so a world put back into an earlier state (a
+        restore, a new day) would otherwise step with traces of the contacts it had; taking
+        each body out of collision and back removes them."""
+        start = time.perf_counter()
+        cid = self.client
+        for i, b in enumerate(self.bodies):
+            if self._colliding[i]:
+                p.setCollisionFilterGroupMask(b, -1, 0, 0, physicsClientId=cid)
+                p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
+        self.engine_seconds += time.perf_counter() - start
 
     # ------------------------------------------------------------------ body modes
-    def make_static(self, i: int, pos: np.ndarray) -> None:
+    def make_static(self, i: int, pos: np.ndarray,
+                    orientation: tuple[float, float, float, float] = (0, 0, 0, 1)) -> None:
         """Fix vehicle ``i`` at ``pos`` (parked, hovering, or grounded): no integration cost."""
         start = time.perf_counter()
         cid, b = self.client, self.bodies[i]
@@ -181,10 +204,11 @@ class FlightPhysics:
         if not self._colliding[i]:
             p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
             self._colliding[i] = True
-        p.resetBasePositionAndOrientation(b, pos.tolist(), (0, 0, 0, 1), physicsClientId=cid)
+        p.resetBasePositionAndOrientation(b, pos.tolist(), orientation, physicsClientId=cid)
         self.engine_seconds += time.perf_counter() - start
 
-    def make_dynamic(self, i: int, pos: np.ndarray | None = None) -> None:
+    def make_dynamic(self, i: int, pos: np.ndarray | None = None,
+                     orientation: tuple[float, float, float, float] = (0, 0, 0, 1)) -> None:
         """Let the engine move vehicle ``i`` (in flight inside the airspace)."""
         start = time.perf_counter()
         cid, b = self.client, self.bodies[i]
@@ -192,7 +216,7 @@ class FlightPhysics:
             p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
             self._colliding[i] = True
         if pos is not None:
-            p.resetBasePositionAndOrientation(b, pos.tolist(), (0, 0, 0, 1), physicsClientId=cid)
+            p.resetBasePositionAndOrientation(b, pos.tolist(), orientation, physicsClientId=cid)
         if not self._dynamic[i]:
             p.changeDynamics(b, -1, mass=self.mass_kg, localInertiaDiagonal=self._inertia,
                              physicsClientId=cid)
