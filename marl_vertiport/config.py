@@ -210,6 +210,12 @@ class EnvConfig:
 # --------------------------------------------------------------------------------------
 
 
+#: Most vehicles, hover spots or destinations a config may ask for (a bound on the arrays a
+#: layout allocates; the shipped configs use at most 40).
+MAX_COUNT = 1000
+#: Most engine substeps per decision step (flight seconds per step times the physics rate): the
+#: shipped configs use 12; far more makes a step take seconds.
+MAX_SUBSTEPS = 2000
 #: The paper's floor for the physics update rate ("at least 45 Hz").
 PHYSICS_RATE_FLOOR_HZ = 45.0
 #: The highest physics rate accepted: above it a step's substeps cost time for no accuracy.
@@ -249,7 +255,11 @@ def _validate(cfg: EnvConfig) -> None:
     lay, fl, sc, bat, rw, sf, un = (
         cfg.layout, cfg.flight, cfg.schedule, cfg.battery, cfg.reward, cfg.safety, cfg.uncertainty
     )
-    _check(cfg.fleet_size >= 1, "fleet_size", f"must be >= 1, got {cfg.fleet_size}")
+    _check(1 <= cfg.fleet_size <= MAX_COUNT, "fleet_size",
+           f"must lie in [1, {MAX_COUNT}], got {cfg.fleet_size}")
+    for name in ("hover_ring_count", "destination_ring_count"):
+        _check(getattr(lay, name) <= MAX_COUNT, f"layout.{name}",
+               f"must be <= {MAX_COUNT}, got {getattr(lay, name)}")
     _check(len(lay.charging_ports_xy_m) >= 1, "layout.charging_ports_xy_m",
            "the vertiport needs at least one charging port")
     n_hover = len(lay.hover_spots_xy_m) or lay.hover_ring_count
@@ -286,6 +296,10 @@ def _validate(cfg: EnvConfig) -> None:
                f"{fl.physics_rate_hz:g}; set flight.allow_low_physics_rate: true to go below it")
     _check(fl.physics_rate_hz <= PHYSICS_RATE_MAX_HZ, "flight.physics_rate_hz",
            f"must be <= {PHYSICS_RATE_MAX_HZ:g} Hz, got {fl.physics_rate_hz:g}")
+    substeps = fl.flight_seconds_per_step * fl.physics_rate_hz
+    _check(substeps <= MAX_SUBSTEPS, "flight.flight_seconds_per_step",
+           f"{fl.flight_seconds_per_step:g} s of flight per step at {fl.physics_rate_hz:g} Hz is "
+           f"{substeps:.3g} engine substeps per step; at most {MAX_SUBSTEPS} are allowed")
     for name in ("hover_altitude_m", "transit_altitude_m"):
         _check(getattr(fl, name) > fl.vehicle_height_m, f"flight.{name}",
                f"must be above the vehicle's height ({fl.vehicle_height_m:g} m), so that a vehicle "

@@ -151,3 +151,15 @@ def test_hover_and_transit_altitudes_must_be_off_the_ground():
     for key in ("flight.hover_altitude_m", "flight.transit_altitude_m"):
         with pytest.raises(ConfigError, match=f"^{re.escape(key)}: must be above the vehicle's height"):
             load_config("paper", **{key: 0.125})
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("layout.destination_ring_count", 10**9, "must be <= 1000"),
+    ("layout.hover_ring_count", 10**9, "must be <= 1000"),
+    ("fleet_size", 10**9, "must lie in [1, 1000]"),
+    ("flight.flight_seconds_per_step", 1e6, "engine substeps per step; at most 2000"),
+])
+def test_sizes_that_would_exhaust_memory_or_time_are_refused(key, value, words):
+    """Found by make fuzz: a billion ring destinations took 24 GB before anything ran."""
+    with pytest.raises(ConfigError, match=f"^{re.escape(key)}: .*{re.escape(words)}"):
+        load_config("paper", **{key: value})
