@@ -216,6 +216,8 @@ MAX_COUNT = 1000
 #: Most engine substeps per decision step (flight seconds per step times the physics rate): the
 #: shipped configs use 12; far more makes a step take seconds.
 MAX_SUBSTEPS = 2000
+#: Shortest distance a vehicle may cover in a step (cruise speed times flight time per step).
+MIN_STEP_M = 0.01
 #: The paper's floor for the physics update rate ("at least 45 Hz").
 PHYSICS_RATE_FLOOR_HZ = 45.0
 #: The highest physics rate accepted: above it a step's substeps cost time for no accuracy.
@@ -296,6 +298,10 @@ def _validate(cfg: EnvConfig) -> None:
                f"{fl.physics_rate_hz:g}; set flight.allow_low_physics_rate: true to go below it")
     _check(fl.physics_rate_hz <= PHYSICS_RATE_MAX_HZ, "flight.physics_rate_hz",
            f"must be <= {PHYSICS_RATE_MAX_HZ:g} Hz, got {fl.physics_rate_hz:g}")
+    step_m = fl.cruise_speed_mps * fl.flight_seconds_per_step
+    _check(step_m >= MIN_STEP_M, "flight.flight_seconds_per_step",
+           f"a step of {fl.flight_seconds_per_step:g} s at {fl.cruise_speed_mps:g} m/s covers "
+           f"{step_m:.3g} m; at least {MIN_STEP_M:g} m is needed for a vehicle to get anywhere")
     substeps = fl.flight_seconds_per_step * fl.physics_rate_hz
     _check(substeps <= MAX_SUBSTEPS, "flight.flight_seconds_per_step",
            f"{fl.flight_seconds_per_step:g} s of flight per step at {fl.physics_rate_hz:g} Hz is "

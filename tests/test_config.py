@@ -163,3 +163,9 @@ def test_sizes_that_would_exhaust_memory_or_time_are_refused(key, value, words):
     """Found by make fuzz: a billion ring destinations took 24 GB before anything ran."""
     with pytest.raises(ConfigError, match=f"^{re.escape(key)}: .*{re.escape(words)}"):
         load_config("paper", **{key: value})
+
+
+def test_a_step_too_short_to_move_is_refused():
+    """Found by make fuzz: 1e-277 m/s for 3e-279 s per step divided by zero in the energy model."""
+    with pytest.raises(ConfigError, match=r"^flight\.flight_seconds_per_step: .* at least 0\.01 m"):
+        load_config("paper", **{"flight.cruise_speed_mps": 1e-277, "flight.flight_seconds_per_step": 3e-279})

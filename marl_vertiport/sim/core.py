@@ -696,6 +696,11 @@ class VertiportSim:
         # Engine contacts: those left at the end of the step, and those resolved within its
         # substeps (a deflected body and a vehicle that came within touching distance of it).
         contacts = set(self.physics.contact_pairs())
+        if contacts:
+            # Each step's contacts are resolved afresh: the engine's cached contact points
+            # would warm-start the next step, a state no snapshot holds, so a restored world
+            # would step differently.
+            self.physics.forget_contacts()
         if self._deflected:
             deflected = set(self._deflected)
             contacts.update(pair for pair, d in zip(pairs, dmin)

@@ -70,6 +70,8 @@ VEHICLE_COLOURS = (
 #: Projection of ``camera_image``: field of view (degrees), near and far clip planes (m).
 CAMERA_FOV_DEG, CAMERA_NEAR_M, CAMERA_FAR_M = 50.0, 0.5, 400.0
 
+#: Orientation of a level vehicle (the identity quaternion).
+_UPRIGHT = (0.0, 0.0, 0.0, 1.0)
 _PARKED_FAR_Z_M = -50.0  # where bodies of vehicles outside the airspace wait (below ground)
 
 
@@ -277,7 +279,15 @@ class FlightPhysics:
                     p.applyExternalForce(b, -1, (g * vel[0], g * vel[1], g * vel[2]), pos,
                                          p.WORLD_FRAME, physicsClientId=cid)
         p.stepSimulation(physicsClientId=cid)
-        positions = [p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)[0] for i in vehicles]
+        positions = []
+        for i in vehicles:
+            pos, orn = p.getBasePositionAndOrientation(bodies[i], physicsClientId=cid)
+            if orn != _UPRIGHT:
+                # A contact tipped the box; a speed-commanded vehicle flies level again at once.
+                # (An orientation would also be state that no snapshot restores exactly: the
+                # engine keeps a rotation matrix, a snapshot a quaternion.)
+                p.resetBasePositionAndOrientation(bodies[i], pos, _UPRIGHT, physicsClientId=cid)
+            positions.append(pos)
         self.engine_seconds += time.perf_counter() - start
         self.engine_steps += 1
         return positions
