@@ -9,6 +9,7 @@ from agents.bench import main
 def test_bench_smoke(tmp_path):
     report = tmp_path / "performance.md"
     assert main(["--steps", "200", "--repeats", "2", "--configs", "paper", "large",
+                 "--traffic-days", "1",
                  "--vector-steps", "10", "--copies", "2", "--train-iterations", "1",
                  "--out", str(tmp_path), "--report", str(report)]) == 0
     data = json.loads((tmp_path / "bench.json").read_text())
@@ -19,6 +20,12 @@ def test_bench_smoke(tmp_path):
         assert row["engine_us_per_step"] > 0 and row["overhead_ratio"] > 0
         assert row["engine_alone_us_per_step"] > 0 and row["overhead_ratio_engine_alone"] > 0
         assert row["moving_overhead_ratio"] > 0 and 0 < row["moving_fraction"] <= 1
+    assert {(r["workload"], r["config"]) for r in data["traffic"]} == {
+        ("heuristic", "paper"), ("fcfs", "paper"), ("heuristic", "large"), ("fcfs", "large")}
+    for row in data["traffic"]:
+        assert row["steps"] > 0 and row["days"] == 1
+        assert row["steps_per_s_min"] <= row["steps_per_s_median"] <= row["steps_per_s_max"]
+        assert row["engine_alone_us_per_step"] > 0 and 0 < row["moving_fraction"] <= 1
     assert data["profile"]["top"] and all(0 <= e["own_share"] <= 1 for e in data["profile"]["top"])
     assert [(r["copies"], r["processes"]) for r in data["vector"]] == [(2, 1), (2, 1), (2, 2)]
     assert [r["batch"] for r in data["inference"]] == [1, 64]
@@ -28,6 +35,7 @@ def test_bench_smoke(tmp_path):
     assert all(r["us_per_step"] > 0 for r in data["api_floor"])
     text = report.read_text()
     assert "overhead / engine alone" in text and "training throughput" in text
+    assert "AEC steps/s under the dispatcher's traffic on the paper's vertiport" in text
     assert "Where a step's time goes" in text and "The floor under that ratio" in text
 
 
@@ -94,3 +102,27 @@ def test_floor_paragraph_names_the_binding_api_and_the_room_left():
     assert "0.80 times" in line and "leaves 1.0 µs" in line  # single-agent: room left
     assert "at most 0.20 times" in line
     assert _floor_lines({}, env_rows) == []  # results of an older benchmark: no paragraph
+
+
+def test_replaying_a_controllers_recorded_actions_reproduces_its_days():
+    """The traffic the benchmark replays is the controller's: replayed through the env, the
+    recorded actions give the same day, metric for metric."""
+    from agents.bench.workloads import record_traffic
+    from agents.controllers.base import run_aec_episode
+    from agents.controllers.registry import make_controller
+    from marl_vertiport import vertiport_v0
+
+    traffic = record_traffic("heuristic", "paper_uncertain", days=2, seed=31)
+    env = vertiport_v0.env(config="paper_uncertain")
+    for d, actions in enumerate(traffic):
+        played = run_aec_episode(env, make_controller("heuristic"), seed=31 + d)
+
+        class Replay:
+            def __init__(self):
+                self.it = iter(actions)
+
+            def act(self, observation):
+                return next(self.it)
+
+        replayed = run_aec_episode(env, Replay(), seed=31 + d)
+        assert replayed == played and len(actions) == played["steps"]

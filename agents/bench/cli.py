@@ -33,7 +33,7 @@ from typing import Any
 from agents.common.files import write_atomic
 from agents.bench.workloads import (
     bench_api_floor, bench_env, bench_env_memory, bench_inference, bench_profile,
-    bench_training, bench_vector,
+    bench_training, bench_traffic, bench_vector,
 )
 from agents.bench.report import report
 
@@ -44,6 +44,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=20_000, help="env steps per timed run")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per measurement")
     parser.add_argument("--configs", nargs="+", default=["paper", "paper_uncertain", "large"])
+    parser.add_argument("--traffic-days", type=int, default=2,
+                        help="days of each controller's traffic to record and replay (default: 2)")
+    parser.add_argument("--traffic-agents", nargs="+", default=["heuristic", "fcfs"],
+                        help="controllers whose traffic is replayed (default: heuristic fcfs)")
     parser.add_argument("--vector-steps", type=int, default=400)
     parser.add_argument("--copies", type=int, default=16)
     parser.add_argument("--train-iterations", type=int, default=5)
@@ -55,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
         "machine": f"{platform.machine()}, {os.cpu_count()} cores", "python": platform.python_version(),
     }
     print("benchmarking (each part in turn) ...", file=sys.stderr)
+    results["traffic"] = bench_traffic([c for c in args.configs if c in ("paper", "large")] or args.configs[:1],
+                                       args.traffic_agents, args.traffic_days, args.repeats)
     results["env"] = bench_env(args.steps, args.repeats, args.configs)
     results["api_floor"] = bench_api_floor(args.steps, args.repeats)
     results["profile"] = bench_profile(args.steps)

@@ -37,6 +37,37 @@ def _floor_lines(results: dict[str, Any], env_rows: list[dict[str, Any]]) -> lis
     ]
 
 
+def _traffic_lines(rows: list[dict[str, Any]]) -> list[str]:
+    """The headline: steps per second under the controllers' own traffic."""
+    if not rows:
+        return []
+    head = next((r for r in rows if (r["workload"], r["config"]) == ("heuristic", "paper")), rows[0])
+    out = [
+        "## Under real traffic (the headline)",
+        "",
+        f"**{head['steps_per_s_median']:,.0f} AEC steps/s under the dispatcher's traffic on the "
+        f"paper's vertiport**, {head['times_paper']:,.0f} times the paper's simulator. Each "
+        "controller's actions for whole days are recorded first and then replayed through the "
+        "AEC env, so only the env is timed (the controller's own cost is not in these rows). "
+        "Random legal actions (the next table) strand the fleet within hours and leave most "
+        "steps without motion; a controller that keeps the fleet flying is the load users have.",
+        "",
+        "| traffic | config | days | steps/s (median) | min - max | µs per step | steps with "
+        "motion | engine alone µs per step | overhead / engine | overhead / engine, steps with "
+        "motion | overhead / engine alone |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        out.append(f"| {r['workload']} | {r['config']} | {r['days']} | {r['steps_per_s_median']:,.0f} | "
+                   f"{r['steps_per_s_min']:,.0f} - {r['steps_per_s_max']:,.0f} | "
+                   f"{r['total_us_per_step']:.0f} | {100 * r['moving_fraction']:.0f} % | "
+                   f"{r['engine_alone_us_per_step']:.1f} | {r['overhead_ratio']:.2f} | "
+                   f"{r['moving_overhead_ratio']:.2f} | {r['overhead_ratio_engine_alone']:.2f} |")
+    out += ["", f"{rows[0]['repeats']} replays of each, in interleaved rounds; columns as in the "
+            "next table.", ""]
+    return out
+
+
 def report(results: dict[str, Any]) -> str:
     env_rows = results["env"]
     ref = next((r for r in env_rows if (r["api"], r["config"]) == ("single_agent", "paper")), env_rows[0])
@@ -46,6 +77,9 @@ def report(results: dict[str, Any]) -> str:
         f"Measured by `{results['command']}` on {results['machine']} "
         f"(Python {results['python']}); regenerate with `make bench`.",
         "",
+    ]
+    lines += _traffic_lines(results.get("traffic") or [])
+    lines += [
         "## Environment steps per second (one process, random legal actions)",
         "",
         "| API | config | steps/s (median) | min - max | µs per step | steps with motion | "

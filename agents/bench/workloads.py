@@ -52,15 +52,47 @@ class _EngineCallRecorder:
         return call
 
 
+def record_traffic(agent: str, config: str, days: int, seed: int) -> list[list[int]]:
+    """A controller's actions, day by day (day ``d`` on seed ``seed + d``), through the AEC
+    env: the traffic that :func:`_env_loop` replays so that only the env is timed."""
+    from agents.controllers.base import _prepare
+    from agents.controllers.registry import make_controller
+    from marl_vertiport import vertiport_v0
+
+    env = vertiport_v0.env(config=config)
+    out = []
+    for d in range(days):
+        policy = make_controller(agent)
+        env.reset(seed=seed + d)
+        _prepare(policy, env, seed + d)
+        actions = []
+        for _ in env.agent_iter():
+            obs, _, term, trunc, _ = env.last()
+            if term or trunc:
+                env.step(None)
+                continue
+            action = int(policy.act(obs))
+            actions.append(action)
+            env.step(action)
+        out.append(actions)
+    env.close()
+    return out
+
+
 def _env_loop(api: str, config: str, steps: int, seed: int,
-              recorder: _EngineCallRecorder | None = None) -> dict[str, float]:
-    """``steps`` env steps with random legal actions from ``seed``, timed, one process.
+              recorder: _EngineCallRecorder | None = None,
+              traffic: list[list[int]] | None = None) -> dict[str, float]:
+    """``steps`` env steps, timed, one process: random legal actions from ``seed``, or (AEC
+    only) the recorded ``traffic`` of :func:`record_traffic` from the same ``seed``, replayed
+    day by day (the controller's own cost is then not in the timing).
 
     With ``recorder`` the engine calls are recorded (and the timings are not representative);
     ``first_timed_call`` is then the index of the first call made inside the timed loop."""
     rng = np.random.default_rng(seed)
     pc = time.perf_counter
     moving_s = moving_engine_s = 0.0
+    if traffic is not None and api != "aec":
+        raise ValueError("recorded traffic is replayed through the AEC env")
     if api == "aec":
         from marl_vertiport import vertiport_v0
 
@@ -69,7 +101,7 @@ def _env_loop(api: str, config: str, steps: int, seed: int,
         physics = env.unwrapped.sim.physics
         physics.engine_seconds, physics.engine_steps = 0.0, 0
         first_call = len(recorder.calls) if recorder else 0
-        n = 0
+        n = day = k = 0
         start = pc()
         while n < steps:
             for agent in env.agent_iter():
@@ -78,8 +110,12 @@ def _env_loop(api: str, config: str, steps: int, seed: int,
                 if term or trunc:
                     env.step(None)
                     continue
-                legal = np.flatnonzero(obs["action_mask"])
-                env.step(int(legal[rng.integers(legal.size)]))
+                if traffic is None:
+                    legal = np.flatnonzero(obs["action_mask"])
+                    env.step(int(legal[rng.integers(legal.size)]))
+                else:
+                    env.step(traffic[day][k])
+                    k += 1
                 if physics.engine_steps != engine_steps:
                     moving_s += pc() - t
                     moving_engine_s += physics.engine_seconds - engine
@@ -87,7 +123,11 @@ def _env_loop(api: str, config: str, steps: int, seed: int,
                 if n >= steps:
                     break
             else:
-                env.reset(seed=seed + n)
+                if traffic is None:
+                    env.reset(seed=seed + n)
+                else:
+                    day, k = (day + 1) % len(traffic), 0
+                    env.reset(seed=seed + day)
     else:
         from marl_vertiport.gym_env import VertiportEnv
 
@@ -139,18 +179,19 @@ def _replay_engine(calls: list[tuple[Any, tuple, dict]], first_timed: int, last_
     return elapsed
 
 
-def _env_run(api: str, config: str, steps: int, seed: int) -> dict[str, float]:
-    """One timed run of ``steps`` env steps with random legal actions, and the engine alone
-    replaying the same motion: a second, untimed run of the same seed records its pybullet
-    calls, which are then replayed in bare pybullet and timed."""
-    run = _env_loop(api, config, steps, seed)
+def _env_run(api: str, config: str, steps: int, seed: int,
+             traffic: list[list[int]] | None = None) -> dict[str, float]:
+    """One timed run of ``steps`` env steps (random legal actions, or replayed ``traffic``),
+    and the engine alone replaying the same motion: a second, untimed run of the same seed
+    records its pybullet calls, which are then replayed in bare pybullet and timed."""
+    run = _env_loop(api, config, steps, seed, traffic=traffic)
     from marl_vertiport.sim import physics as physics_module
 
     real = physics_module.p
     recorder = _EngineCallRecorder(real)
     physics_module.p = recorder
     try:
-        recorded = _env_loop(api, config, steps, seed, recorder)
+        recorded = _env_loop(api, config, steps, seed, recorder, traffic=traffic)
     finally:
         physics_module.p = real
     alone = _replay_engine(recorder.calls, recorded["first_timed_call"], recorded["last_timed_call"])
@@ -203,6 +244,49 @@ def bench_env(steps: int, repeats: int, configs: list[str]) -> list[dict[str, An
         print(f"  env {api:12s} {config:16s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
               f"(overhead/engine {rows[-1]['overhead_ratio']:.2f}, in steps with motion "
               f"{rows[-1]['moving_overhead_ratio']:.2f})", file=sys.stderr)
+    return rows
+
+
+def bench_traffic(configs: list[str], agents: list[str], days: int, repeats: int,
+                  seed: int = 2000) -> list[dict[str, Any]]:
+    """Env steps per second under a controller's traffic: its actions for ``days`` days are
+    recorded first, then replayed through the AEC env ``repeats`` times (interleaved over the
+    cases), so that only the env is timed; with the engine alone and the overhead ratios, as in
+    :func:`bench_env`. Random play strands the fleet within hours and leaves most steps without
+    motion; this is the load the env exists for."""
+    cases = [(config, agent) for config in configs for agent in agents]
+    traffic = {case: record_traffic(case[1], case[0], days, seed) for case in cases}
+    runs: dict[tuple[str, str], list[dict[str, float]]] = {case: [] for case in cases}
+    for r in range(repeats):
+        for case in cases:
+            steps = sum(len(day) for day in traffic[case])
+            runs[case].append(_env_run("aec", case[0], steps, seed, traffic=traffic[case]))
+        print(f"  traffic round {r + 1}/{repeats} done", file=sys.stderr)
+    rows = []
+    for (config, agent) in cases:
+        case_runs = runs[(config, agent)]
+        rate = [run["steps_per_s"] for run in case_runs]
+
+        def median(key: str, scale: float = 1.0) -> float:
+            return scale * statistics.median(run[key] for run in case_runs)
+
+        rows.append({
+            "workload": agent, "api": "aec", "config": config, "days": days, "repeats": repeats,
+            "steps": sum(len(day) for day in traffic[(config, agent)]),
+            "steps_per_s_median": statistics.median(rate), "steps_per_s_min": min(rate),
+            "steps_per_s_max": max(rate),
+            "engine_us_per_step": median("engine_s_per_step", 1e6),
+            "engine_us_per_moving_step": median("engine_s_per_moving_step", 1e6),
+            "engine_alone_us_per_step": median("engine_alone_s_per_step", 1e6),
+            "moving_fraction": median("moving_fraction"),
+            "total_us_per_step": median("total_s_per_step", 1e6),
+            "overhead_ratio": median("overhead_ratio"),
+            "moving_overhead_ratio": median("moving_overhead_ratio"),
+            "overhead_ratio_engine_alone": median("overhead_ratio_engine_alone"),
+            "times_paper": statistics.median(rate) / PAPER_STEPS_PER_S,
+        })
+        print(f"  traffic {agent:10s} {config:10s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
+              f"({rows[-1]['moving_fraction']:.0%} of steps with motion)", file=sys.stderr)
     return rows
 
 
