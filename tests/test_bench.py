@@ -9,7 +9,7 @@ from agents.bench import main
 def test_bench_smoke(tmp_path):
     report = tmp_path / "performance.md"
     assert main(["--steps", "200", "--repeats", "2", "--configs", "paper", "large",
-                 "--traffic-days", "1",
+                 "--traffic-days", "1", "--planner-decisions", "5",
                  "--vector-steps", "10", "--copies", "2", "--train-iterations", "1",
                  "--out", str(tmp_path), "--report", str(report)]) == 0
     data = json.loads((tmp_path / "bench.json").read_text())
@@ -26,6 +26,10 @@ def test_bench_smoke(tmp_path):
         assert row["steps"] > 0 and row["days"] == 1
         assert row["steps_per_s_min"] <= row["steps_per_s_median"] <= row["steps_per_s_max"]
         assert row["engine_alone_us_per_step"] > 0 and 0 < row["moving_fraction"] <= 1
+    assert [r["fleet_size"] for r in data["fleet_sizes"]] == [4, 8, 16, 32]
+    assert all(r["us_per_step"] > 0 and r["steps"] > 0 for r in data["fleet_sizes"])
+    assert (tmp_path / "performance_fleet.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert data["planner"]["decisions"] == 5 and data["planner"]["decisions_per_s"] > 0
     assert data["profile"]["top"] and all(0 <= e["own_share"] <= 1 for e in data["profile"]["top"])
     assert [(r["copies"], r["processes"]) for r in data["vector"]] == [(2, 1), (2, 1), (2, 2)]
     assert [r["batch"] for r in data["inference"]] == [1, 64]
@@ -36,6 +40,7 @@ def test_bench_smoke(tmp_path):
     text = report.read_text()
     assert "overhead / engine alone" in text and "training throughput" in text
     assert "AEC steps/s under the dispatcher's traffic on the paper's vertiport" in text
+    assert "Cost against fleet size" in text and "decisions per" in text
     assert "Where a step's time goes" in text and "The floor under that ratio" in text
 
 

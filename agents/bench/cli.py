@@ -33,7 +33,8 @@ from typing import Any
 from agents.common.files import write_atomic
 from agents.bench.workloads import (
     bench_api_floor, bench_env, bench_env_memory, bench_inference, bench_profile,
-    bench_training, bench_traffic, bench_vector,
+    bench_fleet_sizes, bench_planner, bench_training, bench_traffic, bench_vector,
+    fleet_size_figure,
 )
 from agents.bench.report import report
 
@@ -48,6 +49,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="days of each controller's traffic to record and replay (default: 2)")
     parser.add_argument("--traffic-agents", nargs="+", default=["heuristic", "fcfs"],
                         help="controllers whose traffic is replayed (default: heuristic fcfs)")
+    parser.add_argument("--planner-decisions", type=int, default=200,
+                        help="turns the look-ahead planner is timed over (default: 200)")
     parser.add_argument("--vector-steps", type=int, default=400)
     parser.add_argument("--copies", type=int, default=16)
     parser.add_argument("--train-iterations", type=int, default=5)
@@ -61,6 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     print("benchmarking (each part in turn) ...", file=sys.stderr)
     results["traffic"] = bench_traffic([c for c in args.configs if c in ("paper", "large")] or args.configs[:1],
                                        args.traffic_agents, args.traffic_days, args.repeats)
+    results["fleet_sizes"] = bench_fleet_sizes(args.traffic_days, max(1, args.repeats // 2))
+    figure = (Path(args.report).with_name("performance_fleet.png") if args.report
+              else Path(args.out) / "performance_fleet.png")
+    fleet_size_figure(results["fleet_sizes"], figure)
+    results["fleet_size_figure"] = figure.name
+    results["planner"] = bench_planner("paper", args.planner_decisions)
     results["env"] = bench_env(args.steps, args.repeats, args.configs)
     results["api_floor"] = bench_api_floor(args.steps, args.repeats)
     results["profile"] = bench_profile(args.steps)

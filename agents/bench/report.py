@@ -68,6 +68,35 @@ def _traffic_lines(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
+def _fleet_and_planner_lines(results: dict[str, Any]) -> list[str]:
+    out = []
+    rows = results.get("fleet_sizes") or []
+    if rows:
+        first = rows[0]
+        out += ["### Cost against fleet size (the dispatcher's traffic)", "",
+                "| layout | eVTOLs | steps | µs per step | per eVTOL | steps with motion |",
+                "|---|---:|---:|---:|---:|---:|"]
+        for r in rows:
+            out.append(f"| {r['label']} | {r['fleet_size']} | {r['steps']:,} | {r['us_per_step']:.0f} | "
+                       f"{r['us_per_step'] / r['fleet_size']:.1f} | {100 * r['moving_fraction']:.0f} % |")
+        last = rows[-1]
+        growth = (last["us_per_step"] / first["us_per_step"]) / (last["fleet_size"] / first["fleet_size"])
+        out += ["", f"From {first['fleet_size']} to {last['fleet_size']} eVTOLs the cost of a step grows "
+                f"{last['us_per_step'] / first['us_per_step']:.1f}-fold while the fleet grows "
+                f"{last['fleet_size'] / first['fleet_size']:.0f}-fold ({growth:.2f} of linear).", "",
+                f"![µs per step against fleet size]({results.get('fleet_size_figure', 'performance_fleet.png')})", ""]
+    planner = results.get("planner")
+    if planner:
+        out += ["### The look-ahead planner", "",
+                f"The planner (`rollout`: per candidate action a snapshot of the simulator, 40 steps "
+                f"of the dispatcher, a restore) makes {planner['decisions_per_s']:.1f} decisions per "
+                f"second on `{planner['config']}` over {planner['decisions']} turns, "
+                f"{planner['ms_per_decision_with_a_choice']:.0f} ms for each of the "
+                f"{planner['with_a_choice']} with more than one legal action. It is the warm start's "
+                "teacher, so its speed bounds `make train`.", ""]
+    return out
+
+
 def report(results: dict[str, Any]) -> str:
     env_rows = results["env"]
     ref = next((r for r in env_rows if (r["api"], r["config"]) == ("single_agent", "paper")), env_rows[0])
@@ -79,6 +108,7 @@ def report(results: dict[str, Any]) -> str:
         "",
     ]
     lines += _traffic_lines(results.get("traffic") or [])
+    lines += _fleet_and_planner_lines(results)
     lines += [
         "## Environment steps per second (one process, random legal actions)",
         "",

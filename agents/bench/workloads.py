@@ -52,7 +52,7 @@ class _EngineCallRecorder:
         return call
 
 
-def record_traffic(agent: str, config: str, days: int, seed: int) -> list[list[int]]:
+def record_traffic(agent: str, config: Any, days: int, seed: int) -> list[list[int]]:
     """A controller's actions, day by day (day ``d`` on seed ``seed + d``), through the AEC
     env: the traffic that :func:`_env_loop` replays so that only the env is timed."""
     from agents.controllers.base import _prepare
@@ -288,6 +288,87 @@ def bench_traffic(configs: list[str], agents: list[str], days: int, repeats: int
         print(f"  traffic {agent:10s} {config:10s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
               f"({rows[-1]['moving_fraction']:.0%} of steps with motion)", file=sys.stderr)
     return rows
+
+
+def bench_planner(config: str, decisions: int, seed: int = 2100) -> dict[str, Any]:
+    """Decisions per second of the look-ahead planner (``rollout``: a snapshot of the simulator,
+    40 steps of the dispatcher per candidate action, a restore), timed over its own calls while
+    it drives the AEC env through ``decisions`` turns."""
+    from agents.controllers.base import _prepare
+    from agents.controllers.registry import make_controller
+    from marl_vertiport import vertiport_v0
+
+    env = vertiport_v0.env(config=config)
+    planner = make_controller("rollout")
+    env.reset(seed=seed)
+    _prepare(planner, env, seed)
+    spent, n, planned = 0.0, 0, 0
+    for _ in env.agent_iter():
+        obs, _, term, trunc, _ = env.last()
+        if term or trunc:
+            env.step(None)
+            continue
+        start = time.perf_counter()
+        action = int(planner.act(obs))
+        spent += time.perf_counter() - start
+        planned += int(obs["action_mask"].sum() > 1)
+        env.step(action)
+        n += 1
+        if n >= decisions:
+            break
+    env.close()
+    return {"config": config, "decisions": n, "with_a_choice": planned, "seconds": spent,
+            "decisions_per_s": n / max(spent, 1e-12),
+            "ms_per_decision_with_a_choice": 1e3 * spent / max(planned, 1)}
+
+
+#: Layouts for the cost against fleet size: (label, config, overrides).
+FLEET_SIZES = (("4 eVTOLs (paper)", "paper", {}), ("8 eVTOLs (wide)", "wide", {}),
+               ("16 eVTOLs (large)", "large", {}),
+               ("32 eVTOLs (fleet40 layout)", "fleet40", {"fleet_size": 32}))
+
+
+def bench_fleet_sizes(days: int, repeats: int, seed: int = 2200) -> list[dict[str, Any]]:
+    """µs per AEC step under the dispatcher's recorded traffic for 4, 8, 16 and 32 eVTOLs."""
+    from marl_vertiport.config import load_config
+
+    rows = []
+    for label, name, overrides in FLEET_SIZES:
+        cfg = load_config(name, **overrides)
+        traffic = record_traffic("heuristic", cfg, days, seed)
+        steps = sum(len(day) for day in traffic)
+        runs = [_env_loop("aec", cfg, steps, seed, traffic=traffic) for _ in range(repeats)]
+        per_step = statistics.median(run["elapsed_s"] / run["steps"] for run in runs)
+        rows.append({"label": label, "fleet_size": cfg.fleet_size, "steps": steps,
+                     "us_per_step": 1e6 * per_step,
+                     "moving_fraction": statistics.median(r["moving_steps"] / r["steps"] for r in runs)})
+        print(f"  fleet {cfg.fleet_size:3d}: {rows[-1]['us_per_step']:.0f} µs per step", file=sys.stderr)
+    return rows
+
+
+def fleet_size_figure(rows: list[dict[str, Any]], path: Path) -> None:
+    """µs per step against fleet size, with the line proportional to the fleet through the
+    smallest fleet's point for comparison; a PNG at ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = [r["fleet_size"] for r in rows]
+    us = [r["us_per_step"] for r in rows]
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=110)
+    ax.plot(n, us, "o-", label="measured (dispatcher's traffic, AEC)")
+    ax.plot(n, [us[0] * k / n[0] for k in n], "--", color="grey", label="linear in the fleet")
+    ax.set_xlabel("eVTOLs")
+    ax.set_ylabel("µs per env step")
+    ax.set_xticks(n)
+    ax.set_ylim(bottom=0)
+    ax.legend(frameon=False)
+    ax.set_title("Cost of a step against fleet size")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def _api_floor_loop(api: str, steps: int, actions: int = 14, agents: int = 4) -> float:
