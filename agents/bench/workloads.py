@@ -209,6 +209,29 @@ def _env_run(api: str, config: str, steps: int, seed: int,
     }
 
 
+def _summary(case_runs: list[dict[str, float]]) -> dict[str, float]:
+    """The row of one measurement from its repeated runs (:func:`_env_run`): medians over the
+    runs, with the spread of the rate."""
+    rate = [run["steps_per_s"] for run in case_runs]
+
+    def median(key: str, scale: float = 1.0) -> float:
+        return scale * statistics.median(run[key] for run in case_runs)
+
+    return {
+        "steps_per_s_median": statistics.median(rate), "steps_per_s_min": min(rate),
+        "steps_per_s_max": max(rate),
+        "engine_us_per_step": median("engine_s_per_step", 1e6),
+        "engine_us_per_moving_step": median("engine_s_per_moving_step", 1e6),
+        "engine_alone_us_per_step": median("engine_alone_s_per_step", 1e6),
+        "moving_fraction": median("moving_fraction"),
+        "total_us_per_step": median("total_s_per_step", 1e6),
+        "overhead_ratio": median("overhead_ratio"),
+        "moving_overhead_ratio": median("moving_overhead_ratio"),
+        "overhead_ratio_engine_alone": median("overhead_ratio_engine_alone"),
+        "times_paper": statistics.median(rate) / PAPER_STEPS_PER_S,
+    }
+
+
 def bench_env(steps: int, repeats: int, configs: list[str]) -> list[dict[str, Any]]:
     """Every (config, API) measurement ``repeats`` times, the repeats interleaved (round ``r``
     runs every measurement once) so that a drift of the machine's speed over the benchmark
@@ -222,25 +245,8 @@ def bench_env(steps: int, repeats: int, configs: list[str]) -> list[dict[str, An
     rows = []
     for config, api in cases:
         case_runs = runs[(config, api)]
-        rate = [run["steps_per_s"] for run in case_runs]
-
-        def median(key: str, scale: float = 1.0) -> float:
-            return scale * statistics.median(run[key] for run in case_runs)
-
-        rows.append({
-            "api": api, "config": config, "steps": steps, "repeats": repeats,
-            "steps_per_s_median": statistics.median(rate), "steps_per_s_min": min(rate),
-            "steps_per_s_max": max(rate),
-            "engine_us_per_step": median("engine_s_per_step", 1e6),
-            "engine_us_per_moving_step": median("engine_s_per_moving_step", 1e6),
-            "engine_alone_us_per_step": median("engine_alone_s_per_step", 1e6),
-            "moving_fraction": median("moving_fraction"),
-            "total_us_per_step": median("total_s_per_step", 1e6),
-            "overhead_ratio": median("overhead_ratio"),
-            "moving_overhead_ratio": median("moving_overhead_ratio"),
-            "overhead_ratio_engine_alone": median("overhead_ratio_engine_alone"),
-            "times_paper": statistics.median(rate) / PAPER_STEPS_PER_S,
-        })
+        rows.append({"api": api, "config": config, "steps": steps, "repeats": repeats,
+                     **_summary(case_runs)})
         print(f"  env {api:12s} {config:16s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
               f"(overhead/engine {rows[-1]['overhead_ratio']:.2f}, in steps with motion "
               f"{rows[-1]['moving_overhead_ratio']:.2f})", file=sys.stderr)
@@ -265,26 +271,9 @@ def bench_traffic(configs: list[str], agents: list[str], days: int, repeats: int
     rows = []
     for (config, agent) in cases:
         case_runs = runs[(config, agent)]
-        rate = [run["steps_per_s"] for run in case_runs]
-
-        def median(key: str, scale: float = 1.0) -> float:
-            return scale * statistics.median(run[key] for run in case_runs)
-
-        rows.append({
-            "workload": agent, "api": "aec", "config": config, "days": days, "repeats": repeats,
-            "steps": sum(len(day) for day in traffic[(config, agent)]),
-            "steps_per_s_median": statistics.median(rate), "steps_per_s_min": min(rate),
-            "steps_per_s_max": max(rate),
-            "engine_us_per_step": median("engine_s_per_step", 1e6),
-            "engine_us_per_moving_step": median("engine_s_per_moving_step", 1e6),
-            "engine_alone_us_per_step": median("engine_alone_s_per_step", 1e6),
-            "moving_fraction": median("moving_fraction"),
-            "total_us_per_step": median("total_s_per_step", 1e6),
-            "overhead_ratio": median("overhead_ratio"),
-            "moving_overhead_ratio": median("moving_overhead_ratio"),
-            "overhead_ratio_engine_alone": median("overhead_ratio_engine_alone"),
-            "times_paper": statistics.median(rate) / PAPER_STEPS_PER_S,
-        })
+        rows.append({"workload": agent, "api": "aec", "config": config, "days": days,
+                     "repeats": repeats, "steps": sum(len(day) for day in traffic[(config, agent)]),
+                     **_summary(case_runs)})
         print(f"  traffic {agent:10s} {config:10s} {rows[-1]['steps_per_s_median']:8.0f} steps/s "
               f"({rows[-1]['moving_fraction']:.0%} of steps with motion)", file=sys.stderr)
     return rows
