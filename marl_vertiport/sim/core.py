@@ -39,8 +39,8 @@ from marl_vertiport.sim.battery import BatteryModel
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
 from marl_vertiport.sim.metrics import EpisodeMetrics
 from marl_vertiport.sim.schema import (
-    ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, NO_OPERATION, ON_CHARGER,
-    ON_PORT, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, SELF_FEATURES,
+    ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, LEADING_ACTIONS, NO_OPERATION,
+    ON_CHARGER, ON_PORT, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, SELF_FEATURES,
     STATE_EXTRA_FEATURES, STATE_PORT_FEATURES, STATUS_NAMES, TAXIING, ActionLayout, _IS_SELF,
 )
 from marl_vertiport.sim.physics import FlightPhysics
@@ -49,6 +49,8 @@ from marl_vertiport.sim.safety import conflicting_pairs, planned_velocity, swept
 from marl_vertiport.sim.schedule import FlightSchedule
 from marl_vertiport.sim.uncertainty import Uncertainty
 
+#: Index of the first node action ("go to node 0"): the action layout of sim/schema.py.
+_NODES = LEADING_ACTIONS
 # Per status code (indexed by a Python int on hot paths).
 _AIRBORNE = (False, False, True, True, True, True, True, False)
 _IN_TRANSIT_INSIDE = (False, False, False, True, True, False, True, False)
@@ -239,23 +241,23 @@ class VertiportSim:
             mask[acts.stay] = 1
             free = self.node_occupant == -1
             if s == HOVERING:
-                mask[2:2 + self.layout.n_nodes] = free
+                mask[_NODES:_NODES + self.layout.n_nodes] = free
             else:
                 mask[acts.takeoff] = 1
-                mask[2:2 + self.layout.n_ports] = free[: self.layout.n_ports]
+                mask[_NODES:_NODES + self.layout.n_ports] = free[: self.layout.n_ports]
             atc = self.cfg.atc
             if atc.energy_check:  # clear only flights the battery can finish, with the reserve
                 node = self.node.item(v)
                 budget = self.battery.item(v) - atc.energy_reserve_pct
                 hop = self.energy.hop_pct[node]
-                mask[2:2 + self.layout.n_nodes] &= hop < budget
+                mask[_NODES:_NODES + self.layout.n_nodes] &= hop < budget
                 if s != HOVERING:
                     mask[acts.takeoff] = self.energy.trip_pct[node, self.dest.item(v)] < budget
                 else:  # hold only while a landing can still be cleared at the next turn
-                    ports = np.flatnonzero(mask[2:2 + self.layout.n_ports])
+                    ports = np.flatnonzero(mask[_NODES:_NODES + self.layout.n_ports])
                     if ports.size and budget - self._hold_pct <= hop[ports].min():
                         mask[acts.stay] = 0
-                        mask[2 + self.layout.n_ports:2 + self.layout.n_nodes] = 0
+                        mask[_NODES + self.layout.n_ports:_NODES + self.layout.n_nodes] = 0
             mask.setflags(write=False)
         self._mask_cache[v] = mask
         return mask
@@ -268,8 +270,8 @@ class VertiportSim:
             return 0.0
         if action == self.actions.takeoff and self._is_port[node]:
             return float(self.energy.trip_pct[node, self.dest.item(v)])
-        if 2 <= action < 2 + self.layout.n_nodes:
-            return float(self.energy.hop_pct[node, action - 2])
+        if _NODES <= action < _NODES + self.layout.n_nodes:
+            return float(self.energy.hop_pct[node, action - _NODES])
         return 0.0
 
     def _status_masks(self) -> tuple[np.ndarray | None, ...]:
@@ -376,8 +378,8 @@ class VertiportSim:
                 metrics.good_takeoffs += int(good)
                 self._complete_operation(v, now)
                 self._start_departure(v)
-        elif 2 <= a < 2 + self.layout.n_nodes:
-            node = a - 2
+        elif _NODES <= a < _NODES + self.layout.n_nodes:
+            node = a - _NODES
             landing = self.status[v] == HOVERING and self._is_port[node]
             if landing:
                 gamma, good = rm.landing(now, self.pending_time.item(v), self.battery.item(v))
