@@ -55,25 +55,16 @@ class _EngineCallRecorder:
 def record_traffic(agent: str, config: Any, days: int, seed: int) -> list[list[int]]:
     """A controller's actions, day by day (day ``d`` on seed ``seed + d``), through the AEC
     env: the traffic that :func:`_env_loop` replays so that only the env is timed."""
-    from agents.controllers.base import _prepare
+    from agents.controllers.base import run_aec_episode
     from agents.controllers.registry import make_controller
     from marl_vertiport import vertiport_v0
 
     env = vertiport_v0.env(config=config)
     out = []
     for d in range(days):
-        policy = make_controller(agent)
-        env.reset(seed=seed + d)
-        _prepare(policy, env, seed + d)
-        actions = []
-        for _ in env.agent_iter():
-            obs, _, term, trunc, _ = env.last()
-            if term or trunc:
-                env.step(None)
-                continue
-            action = int(policy.act(obs))
-            actions.append(action)
-            env.step(action)
+        actions: list[int] = []
+        run_aec_episode(env, make_controller(agent), seed + d,
+                        on_step=lambda _agent, action, _env: actions.append(action))
         out.append(actions)
     env.close()
     return out

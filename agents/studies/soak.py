@@ -5,9 +5,10 @@ invariants after every step and the memory of the process (``make soak``)::
 
 Each layout's env is built once and reused for all its days, as a long evaluation or training
 run does, so that a leak shows as resident memory (RSS) that grows after the warm-up. Days
-alternate between random legal actions and the dispatcher, on validation seeds. Exit code 0
-when every invariant held and RSS stayed within ``--rss-slack-mb`` of its level after the
-warm-up, 1 otherwise; the report says what was covered.
+alternate between the controllers (random legal actions and the dispatcher by default, any
+agent spec of the registry), on validation seeds. Exit code 0 when every invariant held and
+RSS stayed within ``--rss-slack-mb`` of its level after the warm-up, 1 otherwise; the report
+says what was covered.
 """
 
 from __future__ import annotations
@@ -18,10 +19,8 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import numpy as np
-
 from agents.common.seeds import VALIDATION_SEED_BASE
-from agents.controllers.base import _prepare
+from agents.controllers.base import run_aec_episode
 from agents.controllers.registry import make_controller
 from marl_vertiport import ConfigError, vertiport_v0
 from marl_vertiport.sim.invariants import violations
@@ -45,22 +44,10 @@ def rss_mb() -> float:
 
 def soak_day(env, agent: str, seed: int, events: Counter) -> list[str]:
     """One day; the invariant violations found (with the minute), counting what happened."""
-    policy = make_controller(agent)
-    env.reset(seed=seed)
-    _prepare(policy, env, seed)
     sim = env.unwrapped.sim
-    rng = np.random.default_rng(seed)
     problems: list[str] = []
-    for name in env.agent_iter():
-        obs, _, term, trunc, _ = env.last()
-        if term or trunc:
-            env.step(None)
-            continue
-        if agent == "random":
-            action = int(rng.choice(np.flatnonzero(obs["action_mask"])))
-        else:
-            action = policy.act(obs)
-        env.step(action)
+
+    def check(name: str, _action: int, _env) -> None:
         info = env.infos[name]
         events["steps"] += 1
         for key in ("gusts", "charger_failures", "battery_depletions", "separation_losses",
@@ -70,7 +57,9 @@ def soak_day(env, agent: str, seed: int, events: Counter) -> list[str]:
         events["misreads"] += int(info.get("action") != info.get("commanded_action"))
         found = violations(sim, env.rewards[name])
         if found and len(problems) < 20:
-            problems += [f"minute {sim.minute:g}: {p}" for p in found]
+            problems.extend(f"minute {sim.minute:g}: {p}" for p in found)
+
+    run_aec_episode(env, make_controller(agent), seed, on_step=check)
     return problems
 
 
