@@ -70,7 +70,7 @@ def test_snapshot_is_independent_of_the_sim():
 def test_restore_around_a_contact_replays_exactly(before):
     """Found by make fuzz: a restored world used to step up to 1e-15 m apart from the original
     around a contact, because the engine's cached contact points warm-started its solver and a
-    tipped body's orientation went through a quaternion; contacts are now resolved afresh each
+    tipped body's orientation was state no snapshot held; contacts are now resolved afresh each
     step and vehicles fly level. A snapshot ``before`` steps ahead of the day's first contact
     (0: just after it), then 30 steps twice."""
     high = {"uncertainty.wind_gust_prob": 0.3, "uncertainty.charger_failure_prob": 0.3,

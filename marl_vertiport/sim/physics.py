@@ -152,33 +152,29 @@ class FlightPhysics:
         self.set_body_states(state["bodies"])
         self.engine_seconds = state["engine_seconds"]
 
-    def body_states(self) -> list[tuple[str, tuple[float, ...]]]:
-        """Each body's mode (``"dynamic"``, ``"static"`` or ``"absent"``) and pose: position
-        ``(x, y, z)`` then orientation quaternion ``(qx, qy, qz, qw)`` (a contact can tilt a
-        body)."""
+    def body_states(self) -> list[tuple[str, tuple[float, float, float]]]:
+        """Each body's mode (``"dynamic"``, ``"static"`` or ``"absent"``) and position. Every
+        body is level between steps (:meth:`step` rights a body a contact tipped), so the
+        position is its whole pose."""
         cid = self.client
         modes = ["dynamic" if d else "static" if c else "absent"
                  for d, c in zip(self._dynamic, self._colliding)]
-        out = []
-        for m, b in zip(modes, self.bodies):
-            pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=cid)
-            out.append((m, tuple(pos) + tuple(orn)))
-        return out
+        return [(m, p.getBasePositionAndOrientation(b, physicsClientId=cid)[0])
+                for m, b in zip(modes, self.bodies)]
 
-    def set_body_states(self, states: list[tuple[str, tuple[float, ...]]]) -> None:
-        """Put every body in the mode and at the pose of :meth:`body_states` (a position alone
-        means upright), then drop the engine's cached contacts between bodies, so that a
-        restored world steps exactly as the one it was taken from."""
+    def set_body_states(self, states: list[tuple[str, tuple[float, float, float]]]) -> None:
+        """Put every body in the mode and at the position of :meth:`body_states`, then drop the
+        engine's cached contacts, so that a restored world steps exactly as the one it was
+        taken from."""
         if len(states) != len(self.bodies):
             raise ValueError(f"{len(states)} body states for {len(self.bodies)} vehicle bodies")
-        for i, (mode, pose) in enumerate(states):
-            orn = tuple(pose[3:7]) if len(pose) >= 7 else (0.0, 0.0, 0.0, 1.0)
+        for i, (mode, pos) in enumerate(states):
             if mode == "absent":
                 self.make_absent(i)
             elif mode == "dynamic":
-                self.make_dynamic(i, np.asarray(pose[:3], dtype=float), orn)
+                self.make_dynamic(i, np.asarray(pos, dtype=float))
             else:
-                self.make_static(i, np.asarray(pose[:3], dtype=float), orn)
+                self.make_static(i, np.asarray(pos, dtype=float))
         self.forget_contacts()
 
     def forget_contacts(self) -> None:
@@ -195,8 +191,7 @@ class FlightPhysics:
         self.engine_seconds += time.perf_counter() - start
 
     # ------------------------------------------------------------------ body modes
-    def make_static(self, i: int, pos: np.ndarray,
-                    orientation: tuple[float, float, float, float] = (0, 0, 0, 1)) -> None:
+    def make_static(self, i: int, pos: np.ndarray) -> None:
         """Fix vehicle ``i`` at ``pos`` (parked, hovering, or grounded): no integration cost."""
         start = time.perf_counter()
         cid, b = self.client, self.bodies[i]
@@ -206,11 +201,10 @@ class FlightPhysics:
         if not self._colliding[i]:
             p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
             self._colliding[i] = True
-        p.resetBasePositionAndOrientation(b, pos.tolist(), orientation, physicsClientId=cid)
+        p.resetBasePositionAndOrientation(b, pos.tolist(), _UPRIGHT, physicsClientId=cid)
         self.engine_seconds += time.perf_counter() - start
 
-    def make_dynamic(self, i: int, pos: np.ndarray | None = None,
-                     orientation: tuple[float, float, float, float] = (0, 0, 0, 1)) -> None:
+    def make_dynamic(self, i: int, pos: np.ndarray | None = None) -> None:
         """Let the engine move vehicle ``i`` (in flight inside the airspace)."""
         start = time.perf_counter()
         cid, b = self.client, self.bodies[i]
@@ -218,7 +212,7 @@ class FlightPhysics:
             p.setCollisionFilterGroupMask(b, -1, 1, 1, physicsClientId=cid)
             self._colliding[i] = True
         if pos is not None:
-            p.resetBasePositionAndOrientation(b, pos.tolist(), orientation, physicsClientId=cid)
+            p.resetBasePositionAndOrientation(b, pos.tolist(), _UPRIGHT, physicsClientId=cid)
         if not self._dynamic[i]:
             p.changeDynamics(b, -1, mass=self.mass_kg, localInertiaDiagonal=self._inertia,
                              physicsClientId=cid)
@@ -236,7 +230,7 @@ class FlightPhysics:
             p.setCollisionFilterGroupMask(b, -1, 0, 0, physicsClientId=cid)
             self._colliding[i] = False
         p.resetBasePositionAndOrientation(
-            b, [0.0, 0.0, _PARKED_FAR_Z_M - 5.0 * i], (0, 0, 0, 1), physicsClientId=cid
+            b, [0.0, 0.0, _PARKED_FAR_Z_M - 5.0 * i], _UPRIGHT, physicsClientId=cid
         )
         self.engine_seconds += time.perf_counter() - start
 
