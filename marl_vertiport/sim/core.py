@@ -84,6 +84,9 @@ class VertiportSim:
         self.park_z_m = fl.vehicle_height_m / 2.0
         # Largest centre distance at which two boxes can touch (corner to corner), plus slack.
         self._touch_m = float(np.sqrt(2 * fl.vehicle_size_m ** 2 + fl.vehicle_height_m ** 2)) + 0.05
+        # Within this distance two bodies may be a pair the engine checks for contact (their
+        # boxes plus its margins overlap): a metre of slack over touching.
+        self._near_m = self._touch_m + 1.0
         self.battery_model = BatteryModel(config.battery, _AIRBORNE, ON_PORT, ON_CHARGER)
         self.reward_model = RewardModel(config.reward, config.schedule)
         self.schedule = FlightSchedule(config.schedule)
@@ -698,10 +701,11 @@ class VertiportSim:
         # Engine contacts: those left at the end of the step, and those resolved within its
         # substeps (a deflected body and a vehicle that came within touching distance of it).
         contacts = set(self.physics.contact_pairs())
-        if contacts:
-            # Each step's contacts are resolved afresh: the engine's cached contact points
-            # would warm-start the next step, a state no snapshot holds, so a restored world
-            # would step differently.
+        if contacts or min(dmin) < self._near_m:
+            # Each step's near passes and contacts are resolved afresh: the engine caches, for a
+            # pair of bodies close enough to be checked, its contact points and the last
+            # separating axis, and would warm-start the next step from them, a state no snapshot
+            # holds, so a restored world would step differently.
             self.physics.forget_contacts()
         if self._deflected:
             deflected = set(self._deflected)
