@@ -211,7 +211,7 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
                                       "batch_size": 64, "learning_rate": 1e-3, "dagger_rounds": 1})
     final = train(cfg, tmp_path, log=lambda *_: None, evaluate=False)
     assert final.name == "model_1.pt" and (tmp_path / "model_0.pt").exists()
-    warm = torch.load(tmp_path / "model_warmstart.pt", weights_only=False)["infos"]["warm_start"]
+    warm = torch.load(tmp_path / "model_warmstart.pt", weights_only=True)["infos"]["warm_start"]
     # Two fits (behaviour cloning, one DAgger round), each scored; the best one is kept.
     assert {"fit_0_score", "fit_1_score"} <= set(warm) and "fit_2_score" not in warm
     assert warm["chosen_fit"] == max((0, 1), key=lambda k: warm[f"fit_{k}_score"])
@@ -259,7 +259,7 @@ def test_bad_checkpoints_are_refused_clearly(tmp_path):
     small.write_text("base: paper\nfleet_size: 3\n")
     final = train(tiny_config("single_agent", iterations=1, env_config=str(small)),
                   tmp_path / "small", log=lambda *_: None, evaluate=False)
-    data = torch.load(final, weights_only=False)
+    data = torch.load(final, weights_only=True)
     data["infos"]["marl_vertiport"]["feature_schema"]["ports"].append("altitude_m")
     torch.save(data, tmp_path / "other_schema.pt")
     with pytest.raises(CheckpointError, match="altitude_m"):
@@ -320,7 +320,7 @@ def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
     last = latest_checkpoint(run)
     assert last is not None
     done = int(last.stem.split("_")[1])
-    torch.load(last, weights_only=False)  # the last checkpoint is complete and loads
+    torch.load(last, weights_only=True)  # the last checkpoint is complete and loads
     cfg_short = build_dataclass(TrainConfig, {**cfg, "iterations": done + 2})
     final = train(cfg_short, run, resume=True, log=lambda *_: None, evaluate=False)
     assert final.name == f"model_{done + 1}.pt"
@@ -356,8 +356,8 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
     lines = []
     train(cfg, tmp_path / "cut", resume=True, log=lines.append, evaluate=False)
     assert any("resuming after round 0" in line for line in lines)
-    whole = torch.load(tmp_path / "whole" / "model_warmstart.pt", weights_only=False)
-    cut = torch.load(tmp_path / "cut" / "model_warmstart.pt", weights_only=False)
+    whole = torch.load(tmp_path / "whole" / "model_warmstart.pt", weights_only=True)
+    cut = torch.load(tmp_path / "cut" / "model_warmstart.pt", weights_only=True)
     assert whole["infos"]["warm_start"] == cut["infos"]["warm_start"]
     for key, value in whole["actor_state_dict"].items():
         assert torch.equal(value, cut["actor_state_dict"][key]), key
