@@ -48,6 +48,10 @@ import numpy as np
 from gymnasium.utils import seeding
 from pettingzoo import AECEnv
 from pettingzoo.utils import wrappers
+from pettingzoo.utils.env_logger import EnvLogger
+from pettingzoo.utils.wrappers.order_enforcing import (
+    AECOrderEnforcingIterable, AECOrderEnforcingIterator,
+)
 
 from marl_vertiport.config import EnvConfig
 from marl_vertiport.render import render_frame
@@ -63,19 +67,54 @@ def env(config: str | EnvConfig | dict | None = None, render_mode: str | None = 
 
 
 class OrderEnforcing(wrappers.OrderEnforcingWrapper):
-    """PettingZoo's order-enforcing wrapper with ``last()`` answered by the raw env in one call.
+    """PettingZoo's order-enforcing wrapper with the calls of every step answered by the raw env
+    in one hop.
 
-    The inherited ``last()`` reads the agent, its reward, flags and info through the wrapper's
-    ``__getattr__`` (two hops per attribute, about 8 a step); the raw env returns the same
-    values, and before ``reset`` it raises the inherited one's ``AttributeError``."""
+    The inherited ``last()``, ``step()`` and agent iterator read the agent, its reward, flags,
+    info and the agent list through the wrapper's ``__getattr__`` (two hops per attribute,
+    about 12 a step); these read the raw env's attributes directly and return the same values,
+    with the same errors and warnings before ``reset`` and after the episode."""
 
     def last(self, observe: bool = True) -> tuple:
         if not self._has_reset:
             raise AttributeError("agent_selection cannot be accessed before reset")
         return self.env.last(observe)
 
+    def step(self, action: Any) -> None:
+        if not self._has_reset:
+            EnvLogger.error_step_before_reset()
+        self._has_updated = True
+        if not self.env.agents:
+            EnvLogger.warn_step_after_terminated_truncated()
+        else:
+            self.env.step(action)
+
+    def agent_iter(self, max_iter: int = 2**63) -> AECOrderEnforcingIterable:
+        if not self._has_reset:
+            EnvLogger.error_agent_iter_before_reset()
+        return _AgentIterable(self, max_iter)
+
     def __str__(self) -> str:
         return str(self.env)
+
+
+class _AgentIterable(AECOrderEnforcingIterable):
+    def __iter__(self) -> AECOrderEnforcingIterator:
+        return _AgentIterator(self.env, self.max_iter)
+
+
+class _AgentIterator(AECOrderEnforcingIterator):
+    """PettingZoo's order-enforcing agent iterator reading the raw env's agents directly."""
+
+    def __next__(self) -> str:
+        wrapper = self.env
+        raw = wrapper.env
+        if not raw.agents or self.iters_til_term <= 0:
+            raise StopIteration
+        self.iters_til_term -= 1
+        assert wrapper._has_updated, "need to call step() or reset() in a loop over `agent_iter`"
+        wrapper._has_updated = False
+        return raw.agent_selection
 
 
 def reset_agent_dicts(aec: AECEnv) -> None:

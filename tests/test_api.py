@@ -119,6 +119,40 @@ def test_last_through_the_wrapper_is_the_raw_envs_last():
     env.close()
 
 
+def test_the_wrappers_step_and_iterator_are_pettingzoos(caplog):
+    """Our one-hop step() and agent iterator give the agents, errors and warnings of the
+    inherited ones (PettingZoo's OrderEnforcingWrapper read through __getattr__)."""
+    from pettingzoo.utils import wrappers
+
+    from marl_vertiport.vertiport_v0 import raw_env
+
+    ours, theirs = vertiport_v0.env(config="small"), wrappers.OrderEnforcingWrapper(raw_env(config="small"))
+    for env in (ours, theirs):
+        with pytest.raises(AssertionError, match="before step"):
+            env.step(0)
+        with pytest.raises(AssertionError, match="before agent_iter"):
+            env.agent_iter()
+    seen = []
+    for env in (ours, theirs):
+        env.reset(seed=5)
+        rng, agents = np.random.default_rng(1), []
+        for agent in env.agent_iter(300):
+            obs, _, term, trunc, _ = env.last()
+            agents.append(agent)
+            env.step(None if term or trunc else int(rng.choice(np.flatnonzero(obs["action_mask"]))))
+        seen.append(agents)
+        it = iter(env.agent_iter())
+        next(it)
+        with pytest.raises(AssertionError, match="step"):  # no step between two agents
+            next(it)
+        env.agents.clear()  # as after the last agent's final step
+        caplog.clear()
+        env.step(0)
+        assert "Should reset() first" in caplog.text
+        assert list(env.agent_iter()) == []
+    assert seen[0] == seen[1] and len(seen[0]) == 300
+
+
 def test_api_edges_get_clear_errors():
     """Before reset, an unknown agent id, a step after truncation, and state() through
     gymnasium.make: each either works as documented or says what to do."""

@@ -114,6 +114,21 @@ def test_masks_match_the_rules_in_a_random_run(config):
     assert {ON_PORT, HOVERING, TAXIING, DEPARTING, AWAY} <= seen
 
 
+@pytest.mark.parametrize("config", ["paper", "large"])
+def test_single_legal_action_is_the_masks_only_one(config):
+    sim = new_sim(config, seed=6)
+    rng = np.random.default_rng(3)
+    singles = 0
+    for _ in range(400):
+        for v in range(sim.n):
+            legal_now = np.flatnonzero(sim.action_mask(v)).tolist()
+            only = sim.single_legal_action(v)
+            assert only == (legal_now[0] if len(legal_now) == 1 else None)
+            singles += only is not None
+        sim.step(int(rng.choice(np.flatnonzero(sim.action_mask(sim.acting)))))
+    assert singles > 0
+
+
 # ------------------------------------------------------------------ turns and clock
 def test_round_robin_turns_and_one_minute_per_step():
     sim = new_sim()

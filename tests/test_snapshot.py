@@ -66,6 +66,38 @@ def test_snapshot_is_independent_of_the_sim():
     sim.close()
 
 
+def test_snapshot_copies_every_kind_of_state_as_deepcopy_would():
+    """The snapshot's copy of each value equals copy.deepcopy's and shares nothing mutable with
+    the sim: arrays, routes, sets, the metrics and the generator (the same future draws)."""
+    import copy
+
+    sim = VertiportSim(load_config("paper_uncertain"))
+    sim.reset(np.random.default_rng(2))
+    play(sim, 150, seed=3)
+    snap = sim.snapshot()
+    for key, value in snap.items():
+        if key in ("rng", "_physics"):
+            continue
+        deep = copy.deepcopy(sim.__dict__[key])
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(value, deep)
+            assert not np.shares_memory(value, sim.__dict__[key])
+        elif key == "routes":
+            assert len(value) == len(deep) and value is not sim.routes
+            for got, want, live in zip(value, deep, sim.routes):
+                assert got is not live
+                np.testing.assert_array_equal(np.array(got).reshape(-1, 3), np.array(want).reshape(-1, 3))
+        elif key == "metrics":
+            assert value.summary(sim.delay, 0.0) == deep.summary(sim.delay, 0.0)
+            assert value.action_counts is not sim.metrics.action_counts
+        elif key == "_mask_cache":
+            assert value.keys() == deep.keys()
+        else:
+            assert value == deep, key
+    assert snap["rng"].random(5).tolist() == sim.rng.random(5).tolist()
+    sim.close()
+
+
 @pytest.mark.parametrize("before", [3, 0])
 def test_restore_around_a_contact_replays_exactly(before):
     """Found by make fuzz: a restored world used to step up to 1e-15 m apart from the original

@@ -45,7 +45,10 @@ from marl_vertiport.sim.schema import (
 )
 from marl_vertiport.sim.physics import FlightPhysics
 from marl_vertiport.sim.reward import RewardModel
-from marl_vertiport.sim.safety import conflicting_pairs, planned_velocity, swept_distances_m
+from marl_vertiport.sim.geometry import swept_min_distance_pair
+from marl_vertiport.sim.safety import (
+    SCALAR_PAIRS_MAX, conflicting_pairs, planned_velocity, swept_distances_m,
+)
 from marl_vertiport.sim.schedule import FlightSchedule
 from marl_vertiport.sim.uncertainty import Uncertainty
 
@@ -56,6 +59,35 @@ _AIRBORNE = (False, False, True, True, True, True, True, False)
 _IN_TRANSIT_INSIDE = (False, False, False, True, True, False, True, False)
 
 _DEFLECTION_TOL_M = 1e-4  # engine position vs commanded motion; integration error is ~1e-12
+
+_SHARED = frozenset({int, float, bool, str, type(None)})
+
+
+def _copied(value: Any) -> Any:
+    """A copy of one value of the episode state, as deep as :func:`copy.deepcopy` would make it
+    but faster on the state's own types: arrays, lists, dicts and sets of them are copied,
+    immutable values (numbers, strings, tuples of numbers in sets) are shared; the metrics are
+    copied by their own method and a generator by its state; any other value is deep-copied."""
+    kind = type(value)
+    if kind is np.ndarray:
+        return value.copy()
+    if kind in _SHARED:
+        return value
+    if kind is list:
+        return [_copied(x) for x in value]
+    if kind is dict:
+        return {k: _copied(x) for k, x in value.items()}
+    if kind is set:  # of hashable, so immutable, members: vehicle pairs, vehicle indices
+        return set(value)
+    if kind is EpisodeMetrics:
+        return value.copy()
+    if kind is np.random.Generator:  # the same state, so the same draws from here on
+        bits = value.bit_generator
+        twin = np.random.Generator(type(bits)(0))
+        twin.bit_generator.state = bits.state
+        return twin
+    return copy.deepcopy(value)
+
 
 class IllegalActionError(ValueError):
     """An action that is out of range, of the wrong type, or masked out."""
@@ -101,6 +133,11 @@ class VertiportSim:
         self._charging_node_list = self._charging_nodes.tolist()
         self._agent_names = tuple(f"evtol_{i}" for i in range(self.n))
         self._fixed_masks = self._status_masks()
+        # By status code: the action of a fixed mask with one legal action, -1 for a fixed mask
+        # with several, None where the mask depends on the state.
+        self._fixed_single = tuple(
+            None if m is None else int(np.flatnonzero(m)[0]) if m.sum() == 1 else -1
+            for m in self._fixed_masks)
         self.energy = FlightEnergy(config, self.layout)
         # Battery a hovering vehicle spends until its next turn (at most a full round).
         self._hold_pct = config.battery.hover_drain_pct * self.n
@@ -142,6 +179,7 @@ class VertiportSim:
         self._rel_min = np.zeros(n)  # minutes since the pending operation's scheduled time
         self.plan_vel_xy = np.zeros((n, 2))
         self.conflict = np.zeros(n, dtype=bool)
+        self._any_conflict_probe = False  # whether the last probe set a velocity or a flag
         self.obs_xy = np.zeros((n, 2))
         self.lost = np.zeros(n, dtype=bool)  # stranded: in the air or on the ground for good
         self.lost_min = np.zeros(n)  # minute at the end of the step in which it was lost
@@ -185,6 +223,7 @@ class VertiportSim:
         self._draw_observation_noise()
         self._mask_cache: dict[int, np.ndarray] = {}
         self._evtol_cache: np.ndarray | None = None
+        self._port_cache: np.ndarray | None = None
         self.last_info: dict[str, Any] = {}
 
     # ================================================================== snapshots
@@ -195,7 +234,7 @@ class VertiportSim:
         The engine needs no more than that: a dynamic body's velocity is set at the start of
         every step, and bodies carry no other state between steps.
         """
-        state = {k: copy.deepcopy(v) for k, v in self.__dict__.items() if k not in self._static_keys}
+        state = {k: _copied(v) for k, v in self.__dict__.items() if k not in self._static_keys}
         state["_physics"] = self.physics.body_states()
         return state
 
@@ -204,7 +243,7 @@ class VertiportSim:
         another sim built from the same config (the snapshot itself is not changed)."""
         for k, v in state.items():
             if k != "_physics":
-                setattr(self, k, copy.deepcopy(v))
+                setattr(self, k, _copied(v))
         self.physics.set_body_states(state["_physics"])
         if not self.uncertainty.noisy_observations:
             self.obs_xy = self.pos[:, :2]  # a view of the positions, as after a step
@@ -294,6 +333,14 @@ class VertiportSim:
             mask.setflags(write=False)
             masks.append(mask)
         return tuple(masks)
+
+    def single_legal_action(self, v: int) -> int | None:
+        """The one legal action of vehicle ``v`` now, or ``None`` when it has several."""
+        only = self._fixed_single[self.status.item(v)]
+        if only is not None:
+            return only if only >= 0 else None
+        legal = np.flatnonzero(self.action_mask(v))
+        return int(legal[0]) if legal.size == 1 else None
 
     def has_decision(self, v: int) -> bool:
         return self.status[v] != AWAY and self.status[v] != OUT_OF_SERVICE
@@ -403,11 +450,13 @@ class VertiportSim:
 
         # ---- advance the world one step
         status_during = self.status.tolist()
+        start_xyz = self.pos.tolist()
         self.prev_pos[:] = self.pos
-        gusts = self._move()
+        gusts, end_xyz = self._move(status_during, start_xyz)
         info["gusts"] = gusts
-        info["separation_losses"], info["contacts"] = self._measure_separation()
-        info["touchdowns"] = self._process_arrivals()
+        info["separation_losses"], info["contacts"] = self._measure_separation(
+            status_during, start_xyz, end_xyz)
+        info["touchdowns"] = self._process_arrivals(end_xyz)
         if self._holding:
             for h in sorted(self._holding):
                 self._assign_hover_spot(h)
@@ -436,6 +485,7 @@ class VertiportSim:
         self._refresh_conflicts()
         self._mask_cache = {}
         self._evtol_cache = None
+        self._port_cache = None
         self._choose_actor()
         self._draw_observation_noise()
         self.last_info = info
@@ -515,61 +565,78 @@ class VertiportSim:
         ahead (``t_min >= 0``) and within the separation distance (eqs. 3-4). The relation is
         symmetric; the safety term of a step uses the acting vehicle's flag.
         """
-        self.plan_vel_xy.fill(0.0)
-        self.conflict.fill(False)
+        if self._any_conflict_probe:
+            self.plan_vel_xy.fill(0.0)
+            self.conflict.fill(False)
         cand = [v for v, (s, t) in enumerate(zip(self.status.tolist(), self.has_target.tolist()))
                 if t and _IN_TRANSIT_INSIDE[s]]
+        self._any_conflict_probe = bool(cand)
         if not cand:
             return
         speed = self.cfg.flight.cruise_speed_mps
-        pos, target = self.pos.tolist(), self.target.tolist()
+        pos, target, routes = self.pos.tolist(), self.target.tolist(), self.routes
         vel, start, end = {}, {}, {}
         for v in cand:
             start[v] = (pos[v][0], pos[v][1])
             vel[v] = planned_velocity(start[v], (target[v][0], target[v][1]), speed)
+            last = routes[v][-1] if routes[v] else None
+            end[v] = (target[v][0], target[v][1]) if last is None else (last.item(0), last.item(1))
             self.plan_vel_xy[v] = vel[v]
-            end[v] = tuple((self.routes[v][-1] if self.routes[v] else self.target[v])[:2].tolist())
+        if len(cand) < 2:
+            return
         for a, b in conflicting_pairs(cand, start, end, vel, self.leg_alt.tolist(),
                                       self.cfg.safety.min_separation_m):
             self.conflict[a] = self.conflict[b] = True
 
     # ================================================================== motion
-    def _move(self) -> int:
-        """Move every vehicle with a target for one step; returns the number of gusts.
+    def _move(self, status: list[int], start: list[list[float]]) -> tuple[int, list[list[float]]]:
+        """Move every vehicle with a target for one step.
+
+        Args:
+            status: per vehicle, its status code during the step, ``N`` ints.
+            start: per vehicle, its position at the start of the step, ``N`` lists ``[x, y, z]``.
+
+        Returns:
+            The number of gusts, and per vehicle its position at the end of the step (``N``
+            lists; the vehicles that did not move share their row of ``start``).
 
         Fills ``self._moved`` (vehicles that had a target), ``self._moved_m`` (distance each
         flew this step) and ``self._deflected`` (bodies the engine pushed off their commanded
         motion: only a contact can do that, gusts are accounted for exactly).
 
-        The per-vehicle work is scalar arithmetic in the loop that makes the per-body engine
-        calls anyway: for fleets of a few dozen it is several times cheaper than numpy on
-        arrays of that size (measured; see docs/performance.md).
+        The per-vehicle work is scalar arithmetic on Python lists in the loop that makes the
+        per-body engine calls anyway: for fleets of a few dozen it is several times cheaper than
+        numpy on arrays of that size (measured; see docs/performance.md).
         """
         moving = self.has_target.nonzero()[0].tolist()
-        self._moved, self._moved_m, self._deflected = moving, [], []
+        moved_m: list[float] = []
+        deflected: list[int] = []
+        self._moved, self._moved_m, self._deflected = moving, moved_m, deflected
         if self._any_cmd_vel:
             self.cmd_vel[:] = 0.0
         self._any_cmd_vel = bool(moving)
         if not moving:
-            return 0
-        dt, step_len = self.dt_s, self.step_len_m
+            return 0, start
+        dt, step_len, park_z = self.dt_s, self.step_len_m, self.park_z_m
         keep, n_gusts = self.uncertainty.gust_factors(self.rng, len(moving))
-        pos, target, status, cmd_vel = self.pos, self.target, self.status, self.cmd_vel
+        targets = self.target.tolist()
+        pos, cmd_vel = self.pos, self.cmd_vel
         radius = self.layout.airspace_radius_m
-        bodies, body_vel, body_keep, starts = [], [], [], []
+        end = list(start)
+        bodies, body_vel, body_keep = [], [], []
         for k, v in enumerate(moving):
-            px, py, pz = pos[v].tolist()
-            tx, ty, tz = target[v].tolist()
+            px, py, pz = start[v]
+            tx, ty, tz = targets[v]
             dx, dy, dz = tx - px, ty - py, tz - pz
             dist = math.sqrt(dx * dx + dy * dy + dz * dz)
             scale = (step_len / dist if dist > step_len else 1.0) / dt
             vel = (dx * scale, dy * scale, dz * scale)
             cmd_vel[v] = vel
             f = 1.0 if keep is None else keep[k]
-            if f < 0.0 and vel[2] > 0.0 and pz + vel[2] * dt * f < self.park_z_m:
+            if f < 0.0 and vel[2] > 0.0 and pz + vel[2] * dt * f < park_z:
                 # The ground stops a reversing gust: a vehicle climbing from its pad is pushed
                 # back down to the pad at most, never below it.
-                f = (self.park_z_m - pz) / (vel[2] * dt)
+                f = (park_z - pz) / (vel[2] * dt)
             if status[v] == AWAY:
                 nx, ny, nz = px + vel[0] * dt * f, py + vel[1] * dt * f, pz + vel[2] * dt * f
                 r = math.hypot(nx, ny)
@@ -577,32 +644,34 @@ class VertiportSim:
                     # A reversing gust pushed an outbound vehicle back toward the airspace:
                     # it holds at the boundary (it would otherwise be inside without a body).
                     nx, ny = nx * radius / r, ny * radius / r
-                pos[v] = (nx, ny, nz)
+                pos[v] = end[v] = [nx, ny, nz]
             else:
                 bodies.append(v)
                 body_vel.append(vel)
                 body_keep.append(f)
-                starts.append((px, py, pz))
         if bodies:
             new_pos = self.physics.step(bodies, body_vel, None if keep is None else body_keep)
-            for v, p, s, vel, f in zip(bodies, new_pos, starts, body_vel, body_keep):
-                pos[v] = p
+            for v, p, vel, f in zip(bodies, new_pos, body_vel, body_keep):
+                s = start[v]
+                pos[v] = end[v] = [p[0], p[1], p[2]]
                 off = max(abs(p[0] - s[0] - vel[0] * dt * f), abs(p[1] - s[1] - vel[1] * dt * f),
                           abs(p[2] - s[2] - vel[2] * dt * f))
                 if off > _DEFLECTION_TOL_M:
-                    self._deflected.append(v)
-        prev = self.prev_pos
+                    deflected.append(v)
         for v in moving:
-            a, b = pos[v].tolist(), prev[v].tolist()
-            self._moved_m.append(math.dist(a, b))
-        return n_gusts
+            moved_m.append(math.dist(end[v], start[v]))
+        return n_gusts, end
 
-    def _process_arrivals(self) -> int:
-        """Advance routes of vehicles that reached their waypoint; returns touchdowns."""
+    def _process_arrivals(self, end: list[list[float]]) -> int:
+        """Advance routes of vehicles that reached their waypoint; returns touchdowns.
+
+        ``end``: per vehicle, its position after this step's motion (``N`` lists)."""
+        if not self._moved:
+            return 0
         touchdowns = 0
-        pos, target = self.pos, self.target
+        targets = self.target.tolist()
         for v in self._moved:
-            p, t = pos[v].tolist(), target[v].tolist()
+            p, t = end[v], targets[v]
             if max(abs(p[0] - t[0]), abs(p[1] - t[1]), abs(p[2] - t[2])) >= 1e-6:
                 continue
             if self.routes[v]:
@@ -675,23 +744,33 @@ class VertiportSim:
         self.physics.make_dynamic(v)
 
     # ================================================================== measurement
-    def _measure_separation(self) -> tuple[int, int]:
+    def _measure_separation(self, status: list[int], start: list[list[float]],
+                            end: list[list[float]]) -> tuple[int, int]:
         """New losses of separation (swept over the step) and new engine contacts.
+
+        Args:
+            status: per vehicle, its status code during the step, ``N`` ints.
+            start, end: per vehicle, its position at the start and at the end of the step's
+                motion, ``N`` lists ``[x, y, z]``.
 
         Only pairs with a vehicle that flew inside the airspace this step can change; pairs of
         vehicles that stood still keep their state.
         """
-        movers = [v for v in self._moved if self.pos[v].tolist() != self.prev_pos[v].tolist()
-                  and self.status[v] != AWAY]
-        if self.n < 2 or not movers:
+        movers = [v for v in self._moved if end[v] != start[v] and status[v] != AWAY]
+        n = self.n
+        if n < 2 or not movers:
             return 0, 0
-        present = (self.status != AWAY).tolist()
+        present = [s != AWAY for s in status]
         mover_set = set(movers)
-        pairs = sorted({(min(m, o), max(m, o)) for m in movers for o in range(self.n)
-                        if o != m and present[o]})
+        # Every pair of present vehicles with a mover in it, in sorted order.
+        pairs = [(a, b) for a in range(n) if present[a]
+                 for b in range(a + 1, n) if present[b] and (a in mover_set or b in mover_set)]
         if not pairs:
             return 0, 0
-        dmin = swept_distances_m(self.prev_pos, self.pos, pairs)
+        if len(pairs) > SCALAR_PAIRS_MAX:
+            dmin = swept_distances_m(self.prev_pos, self.pos, pairs)
+        else:
+            dmin = [swept_min_distance_pair(start[a], end[a], start[b], end[b]) for a, b in pairs]
         sep = self.cfg.safety.min_separation_m
         losses = {pair for pair, d in zip(pairs, dmin) if d < sep}
         kept = {pair for pair in self.sep_state if pair[0] not in mover_set and pair[1] not in mover_set}
@@ -881,10 +960,13 @@ class VertiportSim:
         return self._evtol_cache
 
     def port_nodes(self) -> np.ndarray:
-        """Vertiport graph node features ``(P, 4)``: available, type, x_m, y_m."""
-        f = self._port_static.copy()
-        f[:, 0] = self.node_occupant == -1
-        return f
+        """Vertiport graph node features ``(P, 4)``: available, type, x_m, y_m (a new array;
+        built once a step)."""
+        if self._port_cache is None:
+            f = self._port_static.copy()
+            f[:, 0] = self.node_occupant == -1
+            self._port_cache = f
+        return self._port_cache.copy()
 
     def evtol_nodes(self, observer: int) -> np.ndarray:
         """eVTOL graph node features ``(N, 13)`` as seen by vehicle ``observer``."""

@@ -9,6 +9,7 @@ an episode's running totals; its :meth:`~EpisodeMetrics.summary` has exactly the
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,6 +78,11 @@ class EpisodeMetrics:
     stranded_air: int = 0
     stranded_ground: int = 0
     action_counts: np.ndarray | None = None
+
+    def copy(self) -> "EpisodeMetrics":
+        """An independent copy (the action counts copied too)."""
+        counts = self.action_counts
+        return dataclasses.replace(self, action_counts=None if counts is None else counts.copy())
 
     def summary(self, delay_min_per_vehicle: np.ndarray, service_min_lost: float = 0.0) -> dict[str, Any]:
         """The metrics (keys: :data:`METRICS`, then ``action_counts``); ``delay_min_per_vehicle``
