@@ -155,6 +155,24 @@ def test_holding_moves_keep_clear_of_the_ports():
     assert DispatcherController().act(only_close) == STAY
 
 
+def test_remembered_holding_spots_are_the_computed_ones():
+    """The dispatcher's memo of holding spots answers as computing afresh does, on every
+    hovering observation of busy days on two layouts, asked twice each."""
+    ctl, asked = DispatcherController(), 0
+    for config, seed in (("paper", 3), ("wide", 4)):
+        env = VertiportEnv(config)
+        obs, _ = env.reset(seed=seed)
+        for _ in range(1440):
+            view = Observation(obs)
+            if view.status == HOVERING:
+                fresh = DispatcherController()._holding_spot(view)
+                assert ctl.holding_spot(view) == fresh and ctl.holding_spot(view) == fresh
+                asked += 1
+            obs, *_ = env.step(ctl.act(obs))
+        env.close()
+    assert asked > 50 and 0 < len(ctl._holding_memo) < asked
+
+
 def test_dispatcher_counts_holding_vehicles_as_waiting_for_the_charger():
     # A full vehicle on the charger, inside its window, with a vehicle moving between hover
     # spots: the plain dispatcher does not see it waiting, the holding one does and releases.

@@ -56,6 +56,46 @@ def test_candidates_and_unbound_use():
     planner.close()
 
 
+class _AskedEveryTurn(DispatcherController):
+    """The dispatcher without the claim that its act is pure: a planner must ask it every turn."""
+
+    pure_act = False
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls = 0
+
+    def act(self, observation: dict) -> int:
+        self.calls += 1
+        return super().act(observation)
+
+
+def test_planning_shortcuts_change_no_decision_or_value():
+    """A decision with one candidate is not simulated, and rollout turns with one legal action
+    skip a pure base controller: the actions and values are those of asking it every turn."""
+    env = VertiportEnv("paper")
+    fast, slow = RolloutPlanner(horizon=8), RolloutPlanner(horizon=8, base=_AskedEveryTurn())
+    obs, _ = env.reset(seed=6)
+    fast.bind(env.sim)
+    slow.bind(env.sim)
+    skipped = 0
+    for _ in range(160):
+        calls = slow.base.calls
+        action = fast.act(obs)
+        assert slow.act(obs) == action
+        if len(slow.last_q) > 1:
+            assert fast.last_q == slow.last_q
+        else:
+            skipped += 1
+            assert fast.last_q == {}
+            assert slow.base.calls - calls == 1  # only its own choice: nothing was simulated
+        obs, *_ = env.step(action)
+    assert skipped > 0 and slow.base.calls > 160
+    env.close()
+    fast.close()
+    slow.close()
+
+
 def test_terminal_value_by_hand():
     sim = seed0_sim()
     planner = RolloutPlanner(terminal_turns=10)

@@ -8,8 +8,6 @@ episode. One object acts for every eVTOL in turn, as the centralised ATC does.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cached_property
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -41,6 +39,9 @@ class Controller:
     """Convenience base class: ``reset`` does nothing, ``__call__`` is ``act``."""
 
     name = "controller"
+    #: Whether ``act`` is a pure function of its observation: no state it changes, no random
+    #: draws. A planner may then skip asking it where only one action is legal.
+    pure_act = False
 
     def reset(self, seed: int | None = None) -> None:
         """Start of an episode; ``seed`` seeds any randomness of the controller."""
@@ -52,7 +53,6 @@ class Controller:
         return self.act(observation)
 
 
-@dataclass(frozen=True)
 class Observation:
     """Named access to one AEC observation (see docs/environment.md, section 5, and
     docs/controllers.md).
@@ -79,25 +79,47 @@ class Observation:
         return obs.stay if obs.mask[obs.stay] else int(obs.legal()[0])
     """
 
-    raw: dict
+    # A plain class with slots, not a dataclass with cached properties: a controller builds one
+    # per decision, and in Python 3.11 every first read of a cached property takes a lock.
+    __slots__ = ("raw", "_evtol_rows", "_port_rows", "_mask", "_me", "_actions")
 
-    @cached_property
+    def __init__(self, raw: dict) -> None:
+        #: The observation as the env gave it.
+        self.raw = raw
+        self._evtol_rows: np.ndarray | None = None
+        self._port_rows: np.ndarray | None = None
+        self._mask: np.ndarray | None = None
+        self._me: int | None = None
+        self._actions: ActionLayout | None = None
+
+    def __repr__(self) -> str:
+        return f"Observation(raw={self.raw!r})"
+
+    @property
     def _evtols(self) -> np.ndarray:
-        return np.asarray(self.raw["observation"]["evtol_nodes"])
+        if self._evtol_rows is None:
+            self._evtol_rows = np.asarray(self.raw["observation"]["evtol_nodes"])
+        return self._evtol_rows
 
-    @cached_property
+    @property
     def _ports(self) -> np.ndarray:
-        return np.asarray(self.raw["observation"]["port_nodes"])
+        if self._port_rows is None:
+            self._port_rows = np.asarray(self.raw["observation"]["port_nodes"])
+        return self._port_rows
 
-    @cached_property
+    @property
     def mask(self) -> np.ndarray:
         """The action mask, int8 ``(4 + P,)``; 1 = legal now."""
-        return np.asarray(self.raw["action_mask"])
+        if self._mask is None:
+            self._mask = np.asarray(self.raw["action_mask"])
+        return self._mask
 
-    @cached_property
+    @property
     def me(self) -> int:
         """Row of the acting eVTOL in the eVTOL graph (its ``is_self`` column)."""
-        return int(np.argmax(self._evtols[:, _COL["is_self"]]))
+        if self._me is None:
+            self._me = int(np.argmax(self._evtols[:, _COL["is_self"]]))
+        return self._me
 
     def fleet(self, name: str) -> np.ndarray:
         """Column ``name`` of the eVTOL graph, ``(N,)``, e.g. ``fleet("battery_pct")``."""
@@ -126,10 +148,12 @@ class Observation:
     stay = ActionLayout.stay
     takeoff = ActionLayout.takeoff
 
-    @cached_property
+    @property
     def actions(self) -> ActionLayout:
         """The action layout of this observation's vertiport."""
-        return ActionLayout(self.n_nodes)
+        if self._actions is None:
+            self._actions = ActionLayout(self.n_nodes)
+        return self._actions
 
     def go_to(self, node: int) -> int:
         """Action that moves to / lands on vertiport node ``node``."""

@@ -41,6 +41,10 @@ from agents.controllers.base import (
 )
 
 
+#: Bound on the remembered holding spots (see :meth:`DispatcherController.holding_spot`).
+_HOLDING_MEMO_MAX = 4096
+
+
 def _segment_point_distance_m(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Horizontal distance (m) from each of ``points`` ``(K, 2)`` to the segment ``a``-``b``
     (each ``(2,)``), shape ``(K,)``."""
@@ -75,6 +79,7 @@ class DispatcherController(Controller):
     """
 
     name = "heuristic"
+    pure_act = True
 
     def __init__(self, trip_battery_pct: float = 90.0, hop_battery_pct: float = 12.0,
                  early_release_battery_pct: float = 95.0, on_time_tolerance_min: float = 5.0,
@@ -93,6 +98,7 @@ class DispatcherController(Controller):
         self.holding = holding
         self.priority_margin_pct = priority_margin_pct
         self.port_clearance_m = port_clearance_m
+        self._holding_memo: dict[tuple, int | None] = {}
 
     def act(self, observation: dict) -> int:
         obs = Observation(observation)
@@ -207,7 +213,21 @@ class DispatcherController(Controller):
         """The hover spot a hovering vehicle that cannot land on a charger moves to next in the
         holding pattern (``None``: none it may move to): of the free hover spots other than its
         own whose straight path from it keeps ``port_clearance_m`` from every port, the one
-        nearest to a charging port."""
+        nearest to a charging port.
+
+        The answer depends only on the layout, the mask, the vehicle's node and position, and
+        the same ones recur all day (a vehicle waits at a hover spot), so it is remembered: a
+        cache of a pure function, bounded, that changes no answer."""
+        key = (obs.ports("type").tobytes(), obs.ports("x_m").tobytes(), obs.ports("y_m").tobytes(),
+               obs.mask.tobytes(), obs.mine("node"), obs.mine("x_m"), obs.mine("y_m"))
+        memo = self._holding_memo
+        if key not in memo:
+            if len(memo) >= _HOLDING_MEMO_MAX:
+                memo.clear()
+            memo[key] = self._holding_spot(obs)
+        return memo[key]
+
+    def _holding_spot(self, obs: Observation) -> int | None:
         types = obs.ports("type")
         spots = np.flatnonzero(types == HOVER_SPOT)
         chargers = np.flatnonzero(types == CHARGING_PORT)

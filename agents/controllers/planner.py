@@ -34,6 +34,10 @@ from marl_vertiport.sim.layout import HOVER_SPOT
 from marl_vertiport.spaces import ObservationBuilder
 
 
+def _none(_v: int) -> None:
+    return None
+
+
 class RolloutPlanner(Controller):
     """Chooses, among the legal actions of a vehicle on the ground or hovering, the one whose
     dispatcher rollout earns the most reward; in transit it acts as the dispatcher.
@@ -127,13 +131,26 @@ class RolloutPlanner(Controller):
     def q_values(self, sim: VertiportSim, also: int | None = None) -> dict[int, float]:
         """Sum of rewards over the horizon for each candidate action of the acting vehicle, and
         for ``also`` (the base policy's own choice, such as a holding move) if it is not one."""
+        return self._simulate(sim, self._with(self.candidates(sim), also))
+
+    @staticmethod
+    def _with(actions: list[int], also: int | None) -> list[int]:
+        if also is not None and also not in actions:
+            actions.append(int(also))
+        return actions
+
+    def _simulate(self, sim: VertiportSim, actions: list[int]) -> dict[int, float]:
+        """The value of each of ``actions`` (see :meth:`q_values`).
+
+        When the base controller's ``act`` is a pure function of the observation
+        (``pure_act``), a rollout turn with a single legal action takes that action without
+        asking it: it could return nothing else, and no state or generator of its own is
+        skipped."""
         scratch, builder, base = self._scratch, self._builder, self.base
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
         q: dict[int, float] = {}
-        actions = self.candidates(sim)
-        if also is not None and also not in actions:
-            actions.append(int(also))
+        single = scratch.single_legal_action if getattr(base, "pure_act", False) else _none
         for a in actions:
             scratch.restore(snap)
             scratch.rng = np.random.default_rng((self.seed, sim.step_count))
@@ -141,7 +158,9 @@ class RolloutPlanner(Controller):
             for _ in range(self.horizon - 1):
                 if scratch.truncated:
                     break
-                reward, _ = scratch.step(base.act(builder.observe(scratch.acting)))
+                v = scratch.acting
+                only = single(v)
+                reward, _ = scratch.step(base.act(builder.observe(v)) if only is None else only)
                 total += reward
             stranded = self.stranded(scratch) - self.stranded(sim)
             q[a] = total + self.terminal_value(scratch) - self.stranding_penalty * stranded
@@ -182,9 +201,10 @@ class RolloutPlanner(Controller):
         if not np.array_equal(observation["action_mask"], sim.action_mask(v)):
             raise RuntimeError("RolloutPlanner: the observation is not that of the bound env's "
                                "acting vehicle")
-        q = self.last_q = self.q_values(sim, also=fallback)
-        if len(q) < 2:
+        actions = self._with(self.candidates(sim), fallback)
+        if len(actions) < 2:  # nothing to compare: the base policy's choice, unsimulated
             return fallback
+        q = self.last_q = self._simulate(sim, actions)
         best = max(q, key=q.get)
         # Keep the dispatcher's choice unless another action is better by more than the margin.
         return fallback if fallback in q and q[fallback] + self.margin >= q[best] else int(best)
