@@ -50,6 +50,12 @@ def test_fit_then_learner_drives_a_dagger_day():
     learner = _learner(actor, env_cfg, cfg)
     dagger, metrics = label_day(DayTask(env_cfg, 3, 40, "heuristic", 4, learner=learner))
     assert metrics["steps"] == 40 and len(dagger["label"]) > 0
+    # A scoring day: the same learner drives the same day, no teacher runs, nothing is returned.
+    scored, same = label_day(DayTask(env_cfg, 3, 40, "rollout", 4, learner=learner, labelled=False))
+    assert same == metrics and all(len(v) == 0 for v in scored.values())
+    assert scored["evtol_nodes"].shape == (0, 4, 13) and scored["action_mask"].dtype == np.int8
+    with pytest.raises(ValueError, match="learner"):
+        label_day(DayTask(env_cfg, 3, 40, "heuristic", 4, labelled=False))
     with pytest.raises(ValueError, match="teacher"):
         make_teacher("oracle", 4, 0.0, 0)
 
@@ -114,6 +120,7 @@ def test_round_tasks_mix_seeds_noise_and_low_batteries():
     assert [t.env_config["battery"]["initial_pct"] for t in first] == [100.0] * 5 + [10, 30, 10, 30, 10]
     scoring = round_tasks(cfg, env_cfg, 3, {"weights": 1}, last=True)
     assert [t.steps for t in scoring] == [1440] * 2 and all(t.learner for t in scoring)
+    assert not any(t.labelled for t in scoring) and all(t.labelled for t in first)
     seeds = [t.seed for r in range(4) for t in round_tasks(cfg, env_cfg, r, None, last=False)]
     assert len(set(seeds)) == len(seeds) and max(seeds) < 1_000_000  # new per round, not eval seeds
 

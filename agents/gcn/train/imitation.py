@@ -17,7 +17,8 @@ such episodes with every battery starting low; in the day starts a share ``noise
 driver's actions is replaced by random legal ones (see :func:`round_tasks`). Only steps with a choice
 (two or more legal actions) are kept: the others teach nothing. In round 0 the teacher drives;
 in each DAgger round the current actor drives (greedily) and the teacher labels the states the
-actor visits, and the actor is refit on everything collected so far.
+actor visits, and the actor is refit on everything collected so far. A last round of full days
+driven by the last fit scores it; nothing is fit on it, so no teacher runs there.
 """
 
 from __future__ import annotations
@@ -62,6 +63,9 @@ class DayTask:
     noise: float = 0.0
     """Probability that the driver's action at a step with a choice is replaced by a random
     legal one (drawn from a generator seeded by ``seed``); labels are unaffected."""
+    labelled: bool = True
+    """Whether the teacher labels the decisions; ``False`` (a day that only scores the learner
+    that drives it): no teacher runs and no decisions are returned."""
 
 
 def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: int):
@@ -83,11 +87,15 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     from marl_vertiport.gym_env import VertiportEnv
 
     torch.set_num_threads(1)
+    if not task.labelled and task.learner is None:
+        raise ValueError("a day without labels needs a learner to drive it")
     env = VertiportEnv(config=from_dict(task.env_config))
-    teacher = make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed)
+    teacher = (make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed)
+               if task.labelled else None)
     learner = GCNController(task.learner) if task.learner is not None else None
     noise_rng = np.random.default_rng([task.seed, 1])
     obs, _ = env.reset(seed=task.seed)
+    first = {**obs["observation"], "action_mask": obs["action_mask"]}  # the rows' shapes
     if hasattr(teacher, "bind"):
         teacher.bind(env.sim)
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
@@ -96,7 +104,9 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     for _ in range(task.steps):
         mask = obs["action_mask"]
         choice = int(mask.sum()) > 1
-        if choice:
+        if not choice:
+            label = int(np.argmax(mask))
+        elif teacher is not None:
             label = int(teacher.act(obs))
             for key in ACTOR_GROUPS[:3]:
                 rows[key].append(obs["observation"][key])
@@ -109,8 +119,6 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
                 weights.append(float("inf"))
             else:
                 weights.append(max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0)
-        else:
-            label = int(np.argmax(mask))
         action = learner.act(obs) if learner is not None and choice else label
         if choice and task.noise > 0.0 and noise_rng.random() < task.noise:
             action = int(noise_rng.choice(np.flatnonzero(mask)))
@@ -121,7 +129,8 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     env.close()
     if hasattr(teacher, "close"):
         teacher.close()
-    data = {k: np.stack(v) for k, v in rows.items()}
+    data = {k: np.stack(v) if v else np.empty((0, *np.shape(first[k])), np.asarray(first[k]).dtype)
+            for k, v in rows.items()}
     data["label"] = np.asarray(labels, dtype=np.int64)
     data["regret"] = np.asarray(weights, dtype=np.float32)
     return data, metrics
@@ -267,7 +276,8 @@ def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: 
         lengths += [pre.start_steps] * len(levels)
         configs += [_with_battery(scenarios[i % len(scenarios)], pct) for i, pct in enumerate(levels)]
     return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
-                    pre.rollout_margin, learner, pre.noise if d >= pre.days else 0.0)
+                    pre.rollout_margin, learner, pre.noise if d >= pre.days else 0.0,
+                    labelled=not last)
             for d, (conf, steps) in enumerate(zip(configs, lengths))]
 
 
@@ -343,8 +353,9 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         log(f"{tag}: {pre.days} days and {len(tasks) - pre.days} day starts of {pre.start_steps} "
             f"steps ({0 if last else pre.low_battery_starts} with low batteries), "
             f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
-            f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, the "
-            f"{pre.teacher} teacher labels ({pre.workers} worker{'s' if pre.workers != 1 else ''})")
+            f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, "
+            f"{'no labels' if last else f'the {pre.teacher} teacher labels'} "
+            f"({pre.workers} worker{'s' if pre.workers != 1 else ''})")
         new, metrics = collect(tasks, pre.workers, log, tag, sizes)
         full = [m for m in metrics if m["steps"] == pre.day_steps]
         days = [day_score(m, cfg.lost_vehicle_penalty) for m in full] or [float("nan")]

@@ -411,6 +411,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         if cfg.device == "cuda":
             cfg = build_dataclass(TrainConfig, {**to_dict(cfg), "device": f"cuda:{local_rank}"})
         cfg = build_dataclass(TrainConfig, {**to_dict(cfg), "seed": cfg.seed + 1000 * rank})
+    started = time.time()
     torch.set_num_threads(cfg.torch_threads)
     torch.manual_seed(cfg.seed)
     if cfg.device.startswith("cuda") and not torch.cuda.is_available():
@@ -459,6 +460,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     remaining = cfg.iterations - runner.current_learning_iteration
     samples_per_it = cfg.num_envs * cfg.num_steps_per_env
     t0 = time.time()
+    phases = {"set-up and warm start": t0 - started}
     start_it = runner.current_learning_iteration
 
     pending: dict[int, dict[str, float]] = {}
@@ -525,6 +527,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
             unregister_listener(run_dir)
     final = latest_checkpoint(run_dir)
     vec_env.close()
+    phases["PPO"] = time.time() - t0
     if curves or warm_rows:
         plot_curves(curves, run_dir / "learning_curves.png", f"GCN-PPO ({cfg.mode}, {cfg.env_config})",
                     warm_rows)
@@ -535,8 +538,12 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         seeds = f"{first}:{first + cfg.evaluation.episodes}"
         log(f"evaluating {final.name} against {', '.join(cfg.evaluation.agents)} on validation "
             f"seeds {seeds} (test seeds stay for reported numbers)")
+        evaluated = time.time()
         evaluate_main(["--agents", str(final), *cfg.evaluation.agents, "--seeds", seeds,
                        "--out", str(run_dir / "eval")])
+        phases["evaluation"] = time.time() - evaluated
+    log("time: " + ", ".join(f"{name} {sec / 60:.1f} min" for name, sec in phases.items())
+        + f"; {(time.time() - started) / 60:.1f} min in all")
     return final
 
 
