@@ -29,7 +29,11 @@ def test_bench_smoke(tmp_path):
     assert [r["fleet_size"] for r in data["fleet_sizes"]] == [4, 8, 16, 32]
     assert all(r["us_per_step"] > 0 and r["steps"] > 0 for r in data["fleet_sizes"])
     assert (tmp_path / "performance_fleet.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert data["planner"]["decisions"] == 5 and data["planner"]["decisions_per_s"] > 0
+    planner = data["planner"]
+    assert planner["decisions"] == 5 and planner["decisions_per_s"] > 0
+    assert 0 < planner["engine_share"] < 1 and planner["overhead_ratio"] > 0
+    assert planner["overhead_ratio_engine_alone"] > 0 and 0 <= planner["simulated"] <= 5
+    assert data["profile"]["workload"] == "heuristic" and data["profile"]["steps"] == 1440
     assert data["profile"]["top"] and all(0 <= e["own_share"] <= 1 for e in data["profile"]["top"])
     assert [(r["copies"], r["processes"]) for r in data["vector"]] == [(2, 1), (2, 1), (2, 2)]
     assert [r["batch"] for r in data["inference"]] == [1, 64]
@@ -41,7 +45,11 @@ def test_bench_smoke(tmp_path):
     assert "overhead / engine alone" in text and "training throughput" in text
     assert "AEC steps/s under the dispatcher's traffic on the paper's vertiport" in text
     assert "Cost against fleet size" in text and "decisions per" in text
-    assert "Where a step's time goes" in text and "The floor under that ratio" in text
+    assert "Where a step's time goes (cProfile, AEC API, `paper`, the dispatcher's traffic" in text
+    assert "The floor under that ratio" in text and "Against the targets" in text
+    for measure in ("AEC steps/s, dispatcher's traffic, `paper`", "overhead / engine in steps "
+                    "with motion, `large`", "cost per step, 4 to 32 eVTOLs"):
+        assert measure in text
 
 
 def test_api_floor_loop_steps_a_do_nothing_env_through_both_apis():
@@ -69,7 +77,28 @@ def test_engine_replay_repeats_the_recorded_run():
     assert recorded["moving_steps"] == plain["moving_steps"] > 0
     timed = recorder.calls[recorded["first_timed_call"]:recorded["last_timed_call"]]
     assert sum(fn is real.stepSimulation for fn, _, _ in timed) == plain["moving_steps"]
-    assert _replay_engine(recorder.calls, recorded["first_timed_call"], recorded["last_timed_call"]) > 0
+    assert _replay_engine(recorder, recorded["first_timed_call"], recorded["last_timed_call"]) > 0
+
+
+def test_planner_engine_replay_follows_both_clients_and_times_only_the_decisions():
+    """The planner's engine-alone figure replays the calls on the env's client and on its
+    scratch simulator's, each on a fresh client of its own, and times only the decisions'."""
+    from agents.bench.workloads import _EngineCallRecorder, _planner_loop, _replay_engine_spans
+    from marl_vertiport.sim import physics as physics_module
+
+    real = physics_module.p
+    recorder = _EngineCallRecorder(real)
+    physics_module.p = recorder
+    try:
+        recorded = _planner_loop("paper", 40, seed=5, recorder=recorder)
+    finally:
+        physics_module.p = real
+    assert len(recorder.connected) == 2 and len(recorded["spans"]) == 40
+    inside = sum(last - first for first, last in recorded["spans"])
+    assert 0 < inside < len(recorder.calls)  # the env's own steps lie between the spans
+    steps = [fn is real.stepSimulation for fn, _, _ in recorder.calls]
+    assert 0 < sum(any(steps[a:b]) for a, b in recorded["spans"]) <= recorded["simulated"]
+    assert _replay_engine_spans(recorder, recorded["spans"]) > 0
 
 
 def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeypatch):

@@ -11,7 +11,11 @@ Measured:
   steps and over the steps in which bodies move;
 - the engine alone for the same motion: each run's pybullet calls recorded in a second run of
   the same seed and replayed, timed, in bare pybullet;
-- a cProfile summary of the AEC env on the paper's layout;
+- under the traffic of the expert dispatcher and of FCFS (their actions recorded for whole days,
+  then replayed so that only the env is timed), on the paper's layout and ``large``: AEC steps
+  per second, the engine alone and the overhead ratios, the report's headline, measured against
+  the speed targets; the cost of a step for 4 to 32 eVTOLs; a cProfile summary of that busy path;
+- the look-ahead planner's decisions per second over a day, with its engine share;
 - vectorised throughput of K env copies with supersuit, in one process and over 2 processes;
 - actor inference latency at batch 1 and 64, training throughput (env samples per second) of
   ``make train``'s config, and peak memory of an env and of a training run (separate processes).
@@ -49,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="days of each controller's traffic to record and replay (default: 2)")
     parser.add_argument("--traffic-agents", nargs="+", default=["heuristic", "fcfs"],
                         help="controllers whose traffic is replayed (default: heuristic fcfs)")
-    parser.add_argument("--planner-decisions", type=int, default=200,
-                        help="turns the look-ahead planner is timed over (default: 200)")
+    parser.add_argument("--planner-decisions", type=int, default=1440,
+                        help="turns the look-ahead planner is timed over (default: 1440, a day)")
     parser.add_argument("--vector-steps", type=int, default=400)
     parser.add_argument("--copies", type=int, default=16)
     parser.add_argument("--train-iterations", type=int, default=5)
@@ -72,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     results["planner"] = bench_planner("paper", args.planner_decisions)
     results["env"] = bench_env(args.steps, args.repeats, args.configs)
     results["api_floor"] = bench_api_floor(args.steps, args.repeats)
-    results["profile"] = bench_profile(args.steps)
+    results["profile"] = bench_profile(args.traffic_days)
     results["vector"] = bench_vector(args.vector_steps, args.copies)
     results["inference"] = bench_inference()
     results["training"] = bench_training(args.train_iterations)

@@ -89,12 +89,64 @@ def _fleet_and_planner_lines(results: dict[str, Any]) -> list[str]:
     if planner:
         out += ["### The look-ahead planner", "",
                 f"The planner (`rollout`: per candidate action a snapshot of the simulator, 40 steps "
-                f"of the dispatcher, a restore) makes {planner['decisions_per_s']:.1f} decisions per "
-                f"second on `{planner['config']}` over {planner['decisions']} turns, "
-                f"{planner['ms_per_decision_with_a_choice']:.0f} ms for each of the "
-                f"{planner['with_a_choice']} with more than one legal action. It is the warm start's "
-                "teacher, so its speed bounds `make train`.", ""]
+                f"of the dispatcher, a restore) makes **{planner['decisions_per_s']:.0f} decisions per "
+                f"second** on `{planner['config']}` over {planner['decisions']:,} turns, "
+                f"{planner['ms_per_simulated_decision']:.1f} ms for each of the "
+                f"{planner['simulated']:,} it simulates (the others have a single candidate, or "
+                "a vehicle in transit, and take the dispatcher's choice unsimulated). "
+                f"{100 * planner['engine_share']:.0f} % of its time is in the engine's calls "
+                f"(overhead / engine {planner['overhead_ratio']:.2f}, overhead / engine alone "
+                f"{planner['overhead_ratio_engine_alone']:.2f}); the rest is the simulator's "
+                "Python, the dispatcher's rules and the observations it reads. It is the warm "
+                "start's teacher, so its speed bounds `make train`.", ""]
     return out
+
+
+def _target_lines(results: dict[str, Any]) -> list[str]:
+    """Measured against the speed targets (the dispatcher's traffic, one process)."""
+    traffic = {(r["workload"], r["config"]): r for r in results.get("traffic") or []}
+    fleet = results.get("fleet_sizes") or []
+    rows = []
+    for config, target in (("paper", 10_000), ("large", 4_000)):
+        r = traffic.get(("heuristic", config))
+        if r:
+            rows.append((f"AEC steps/s, dispatcher's traffic, `{config}`", f">= {target:,}",
+                         f"{r['steps_per_s_median']:,.0f} (min {r['steps_per_s_min']:,.0f})",
+                         r["steps_per_s_min"] >= target))
+    for config in ("paper", "large"):
+        r = traffic.get(("heuristic", config))
+        if r:
+            rows.append((f"overhead / engine in steps with motion, `{config}`", "<= 2",
+                         f"{r['moving_overhead_ratio']:.2f}", r["moving_overhead_ratio"] <= 2.0))
+    if len(fleet) > 1:
+        growth = ((fleet[-1]["us_per_step"] / fleet[0]["us_per_step"])
+                  / (fleet[-1]["fleet_size"] / fleet[0]["fleet_size"]))
+        rows.append((f"cost per step, {fleet[0]['fleet_size']} to {fleet[-1]['fleet_size']} eVTOLs",
+                     "no worse than linear", f"{growth:.2f} of linear", growth <= 1.0))
+    if not rows:
+        return []
+    out = ["### Against the targets", "", "| measure | target | measured | met |",
+           "|---|---|---|---|"]
+    out += [f"| {name} | {target} | {value} | {'yes' if met else '**no**'} |"
+            for name, target, value, met in rows]
+    return out + [""]
+
+
+def _profile_lines(results: dict[str, Any]) -> list[str]:
+    prof = results.get("profile")
+    if not prof:
+        return []
+    workload = ("the dispatcher's traffic" if prof.get("workload") == "heuristic"
+                else "random legal actions")
+    out = [f"### Where a step's time goes (cProfile, AEC API, `paper`, {workload}, "
+           f"{prof['steps']:,} steps)", "",
+           "| function | calls per step | own time | with callees |", "|---|---:|---:|---:|"]
+    for e in prof["top"]:
+        out.append(f"| `{e['function']}` | {e['calls_per_step']:.2f} | "
+                   f"{100 * e['own_share']:.1f} % | {100 * e['cumulative_share']:.1f} % |")
+    return out + ["", "Functions called at least once every 100 steps; shares of the profiled "
+                  "run's total. The profiler's own cost per call inflates functions that make "
+                  "many small calls.", ""]
 
 
 def report(results: dict[str, Any]) -> str:
@@ -108,6 +160,8 @@ def report(results: dict[str, Any]) -> str:
         "",
     ]
     lines += _traffic_lines(results.get("traffic") or [])
+    lines += _target_lines(results)
+    lines += _profile_lines(results)
     lines += _fleet_and_planner_lines(results)
     lines += [
         "## Environment steps per second (one process, random legal actions)",
@@ -148,20 +202,6 @@ def report(results: dict[str, Any]) -> str:
         "which the engine was stepped (each step timed on its own).",
         "",
     ]
-    prof = results.get("profile")
-    if prof:
-        lines += [
-            f"### Where a step's time goes (cProfile, AEC API, `paper`, {prof['steps']:,} steps)",
-            "",
-            "| function | calls per step | own time | with callees |",
-            "|---|---:|---:|---:|",
-        ]
-        for e in prof["top"]:
-            lines.append(f"| `{e['function']}` | {e['calls_per_step']:.2f} | "
-                         f"{100 * e['own_share']:.1f} % | {100 * e['cumulative_share']:.1f} % |")
-        lines += ["", "Functions called at least once every 100 steps; shares of the profiled "
-                  "run's total. The profiler's own cost per call inflates functions that make "
-                  "many small calls.", ""]
     lines += [
         "## Vectorised copies (supersuit's `gym_vec_env_v0`, single-agent env, random legal actions)",
         "",

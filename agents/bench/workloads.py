@@ -32,18 +32,21 @@ class _EngineCallRecorder:
         self._module = module
         self.calls: list[tuple[Any, tuple, dict]] = []
         self.clients: set[int] = set()
+        #: The clients opened during the recording, in the order they were opened.
+        self.connected: list[int] = []
 
     def __getattr__(self, name: str) -> Any:
         attr = getattr(self._module, name)
         if not callable(attr) or isinstance(attr, type):  # constants and the error class
             return attr
-        calls, clients = self.calls, self.clients
+        calls, clients, connected = self.calls, self.clients, self.connected
         connect, disconnect = self._module.connect, self._module.disconnect
 
         def call(*args: Any, **kwargs: Any) -> Any:
             result = attr(*args, **kwargs)
             if attr is connect:
                 clients.add(result)
+                connected.append(result)
                 calls.append((attr, args, kwargs))
             elif attr is not disconnect and kwargs.get("physicsClientId") in clients:
                 calls.append((attr, args, kwargs))
@@ -147,26 +150,43 @@ def _env_loop(api: str, config: str, steps: int, seed: int,
             "first_timed_call": first_call, "last_timed_call": last_call}
 
 
-def _replay_engine(calls: list[tuple[Any, tuple, dict]], first_timed: int, last_timed: int) -> float:
-    """Replay recorded pybullet calls on a fresh client; seconds taken by the calls of the timed
+def _replay_engine(recorder: _EngineCallRecorder, first_timed: int, last_timed: int) -> float:
+    """Replay recorded pybullet calls on fresh clients; seconds taken by the calls of the timed
     loop (``calls[first_timed:last_timed]``), with nothing but a loop around them."""
+    return _replay_engine_spans(recorder, [(first_timed, last_timed)])
+
+
+def _replay_engine_spans(recorder: _EngineCallRecorder, spans: list[tuple[int, int]]) -> float:
+    """Replay the recorded pybullet calls in order, each recorded client on a fresh one of its
+    own; seconds taken by the calls inside ``spans`` (``(first, last)`` index ranges of
+    ``recorder.calls``, in order), each span timed as one block with nothing but a loop
+    around its calls."""
     from marl_vertiport.sim import physics as physics_module
 
     p = physics_module.p
-    client = p.connect(p.DIRECT)
-
-    def on_client(kwargs: dict) -> dict:
-        return dict(kwargs, physicsClientId=client) if "physicsClientId" in kwargs else kwargs
-
-    for fn, args, kwargs in calls[:first_timed]:  # the world as it was when the loop started
-        if fn is not p.connect:
-            fn(*args, **on_client(kwargs))
-    timed = [(fn, args, on_client(kwargs)) for fn, args, kwargs in calls[first_timed:last_timed]]
-    start = time.perf_counter()
-    for fn, args, kwargs in timed:
-        fn(*args, **kwargs)
-    elapsed = time.perf_counter() - start
-    p.disconnect(physicsClientId=client)
+    fresh = {recorded: p.connect(p.DIRECT) for recorded in recorder.connected}
+    plan = [(fn, args, dict(kwargs, physicsClientId=fresh[kwargs["physicsClientId"]])
+             if "physicsClientId" in kwargs else kwargs)
+            for fn, args, kwargs in recorder.calls if fn is not p.connect]
+    # Indices of recorder.calls -> indices of plan (the connect calls are not replayed).
+    shift, index = 0, []
+    for fn, _, _ in recorder.calls:
+        index.append(len(index) - shift)
+        shift += fn is p.connect
+    index.append(len(plan))
+    elapsed, done = 0.0, 0
+    for first, last in spans:
+        first, last = index[first], index[last]
+        for fn, args, kwargs in plan[done:first]:  # the world as it was when the span began
+            fn(*args, **kwargs)
+        block = plan[first:last]
+        start = time.perf_counter()
+        for fn, args, kwargs in block:
+            fn(*args, **kwargs)
+        elapsed += time.perf_counter() - start
+        done = last
+    for client in fresh.values():
+        p.disconnect(physicsClientId=client)
     return elapsed
 
 
@@ -185,7 +205,7 @@ def _env_run(api: str, config: str, steps: int, seed: int,
         recorded = _env_loop(api, config, steps, seed, recorder, traffic=traffic)
     finally:
         physics_module.p = real
-    alone = _replay_engine(recorder.calls, recorded["first_timed_call"], recorded["last_timed_call"])
+    alone = _replay_engine(recorder, recorded["first_timed_call"], recorded["last_timed_call"])
     n, elapsed, engine = run["steps"], run["elapsed_s"], run["engine_s"]
     moving = run["moving_steps"]
     return {
@@ -270,10 +290,12 @@ def bench_traffic(configs: list[str], agents: list[str], days: int, repeats: int
     return rows
 
 
-def bench_planner(config: str, decisions: int, seed: int = 2100) -> dict[str, Any]:
-    """Decisions per second of the look-ahead planner (``rollout``: a snapshot of the simulator,
-    40 steps of the dispatcher per candidate action, a restore), timed over its own calls while
-    it drives the AEC env through ``decisions`` turns."""
+def _planner_loop(config: str, decisions: int, seed: int,
+                  recorder: _EngineCallRecorder | None = None) -> dict[str, Any]:
+    """The look-ahead planner drives the AEC env through ``decisions`` turns; only its own calls
+    are timed, with the engine's share of them (its snapshots, rollouts and restores, in the
+    env's and its scratch simulator's pybullet clients). With ``recorder`` the engine calls are
+    recorded and ``spans`` lists the index range of each timed call."""
     from agents.controllers.base import _prepare
     from agents.controllers.registry import make_controller
     from marl_vertiport import vertiport_v0
@@ -282,24 +304,58 @@ def bench_planner(config: str, decisions: int, seed: int = 2100) -> dict[str, An
     planner = make_controller("rollout")
     env.reset(seed=seed)
     _prepare(planner, env, seed)
-    spent, n, planned = 0.0, 0, 0
+    engines = [env.unwrapped.sim.physics, planner._scratch.physics]
+    spent = engine = 0.0
+    n = planned = 0
+    spans: list[tuple[int, int]] = []
     for _ in env.agent_iter():
         obs, _, term, trunc, _ = env.last()
         if term or trunc:
             env.step(None)
             continue
+        first = len(recorder.calls) if recorder else 0
+        before = sum(e.engine_seconds for e in engines)
         start = time.perf_counter()
         action = int(planner.act(obs))
         spent += time.perf_counter() - start
-        planned += int(obs["action_mask"].sum() > 1)
+        engine += sum(e.engine_seconds for e in engines) - before
+        if recorder:
+            spans.append((first, len(recorder.calls)))
+        planned += int(planner.last_q != {})
         env.step(action)
         n += 1
         if n >= decisions:
             break
     env.close()
-    return {"config": config, "decisions": n, "with_a_choice": planned, "seconds": spent,
+    planner.close()
+    return {"decisions": n, "simulated": planned, "seconds": spent, "engine_s": engine,
+            "spans": spans}
+
+
+def bench_planner(config: str, decisions: int, seed: int = 2100) -> dict[str, Any]:
+    """Decisions per second of the look-ahead planner (``rollout``: a snapshot of the simulator,
+    40 steps of the dispatcher per candidate action, a restore), timed over its own calls while
+    it drives the AEC env through ``decisions`` turns (1440: a whole day); with the engine's
+    share of that time and the engine alone (the same calls recorded in a second run and
+    replayed in bare pybullet), as for the env rows."""
+    run = _planner_loop(config, decisions, seed)
+    from marl_vertiport.sim import physics as physics_module
+
+    real = physics_module.p
+    recorder = _EngineCallRecorder(real)
+    physics_module.p = recorder
+    try:
+        recorded = _planner_loop(config, decisions, seed, recorder)
+    finally:
+        physics_module.p = real
+    alone = _replay_engine_spans(recorder, recorded["spans"])
+    n, spent, engine = run["decisions"], run["seconds"], run["engine_s"]
+    return {"config": config, "decisions": n, "simulated": run["simulated"], "seconds": spent,
             "decisions_per_s": n / max(spent, 1e-12),
-            "ms_per_decision_with_a_choice": 1e3 * spent / max(planned, 1)}
+            "ms_per_simulated_decision": 1e3 * spent / max(run["simulated"], 1),
+            "engine_share": engine / max(spent, 1e-12),
+            "overhead_ratio": (spent - engine) / max(engine, 1e-12),
+            "overhead_ratio_engine_alone": (spent - alone) / max(alone, 1e-12)}
 
 
 #: Layouts for the cost against fleet size: (label, config, overrides).
@@ -417,17 +473,20 @@ def bench_api_floor(steps: int, repeats: int) -> list[dict[str, Any]]:
         _api_floor_loop(api, steps) for _ in range(repeats))} for api in ("aec", "single_agent")]
 
 
-def bench_profile(steps: int, top: int = 12) -> dict[str, Any]:
-    """cProfile of one AEC run on the paper's layout: the functions called at least once every
+def bench_profile(days: int, top: int = 14, seed: int = 2300) -> dict[str, Any]:
+    """cProfile of the AEC env on the paper's layout replaying ``days`` days of the dispatcher's
+    recorded traffic (the busy path, not random play): the functions called at least once every
     100 steps (not the env's construction) with the largest own time, as shares of the profiled
     run's total (cProfile's own cost inflates small calls)."""
     import cProfile
     import pstats
 
-    _env_loop("aec", "paper", 50, seed=7)  # imports and first-call caches outside the profile
+    traffic = record_traffic("heuristic", "paper", days, seed)
+    steps = sum(len(day) for day in traffic)
+    _env_loop("aec", "paper", 50, seed=seed, traffic=traffic)  # first-call caches outside
     profiler = cProfile.Profile()
     profiler.enable()
-    _env_loop("aec", "paper", steps, seed=7)
+    _env_loop("aec", "paper", steps, seed=seed, traffic=traffic)
     profiler.disable()
     stats = pstats.Stats(profiler).stats
     total = sum(row[2] for row in stats.values())
@@ -443,7 +502,7 @@ def bench_profile(steps: int, top: int = 12) -> dict[str, Any]:
         label = f"{where}:{line}({name})" if line else name
         entries.append({"function": label, "calls_per_step": calls / steps,
                         "own_share": own / total, "cumulative_share": cumulative / total})
-    return {"steps": steps, "top": entries}
+    return {"steps": steps, "workload": "heuristic", "top": entries}
 
 
 def bench_vector(steps: int, copies: int) -> list[dict[str, Any]]:

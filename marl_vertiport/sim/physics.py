@@ -132,8 +132,8 @@ class FlightPhysics:
         self._colliding = np.ones(n_vehicles, dtype=bool)
         self._scenery_built = False
         #: Wall-clock seconds spent in the engine's calls since the benchmark last zeroed it:
-        #: stepping (with its velocity and force commands and position reads), contact queries
-        #: and body mode changes.
+        #: stepping (with its velocity and force commands and position reads), contact queries,
+        #: body mode changes and the position reads of snapshots.
         self.engine_seconds = 0.0
         #: Number of ``step`` calls that advanced the engine (steps in which bodies moved).
         self.engine_steps = 0
@@ -159,8 +159,11 @@ class FlightPhysics:
         cid = self.client
         modes = ["dynamic" if d else "static" if c else "absent"
                  for d, c in zip(self._dynamic, self._colliding)]
-        return [(m, p.getBasePositionAndOrientation(b, physicsClientId=cid)[0])
-                for m, b in zip(modes, self.bodies)]
+        start = time.perf_counter()
+        states = [(m, p.getBasePositionAndOrientation(b, physicsClientId=cid)[0])
+                  for m, b in zip(modes, self.bodies)]
+        self.engine_seconds += time.perf_counter() - start
+        return states
 
     def set_body_states(self, states: list[tuple[str, tuple[float, float, float]]]) -> None:
         """Put every body in the mode and at the position of :meth:`body_states`, then drop the
