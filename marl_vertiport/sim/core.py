@@ -45,7 +45,7 @@ from marl_vertiport.sim.schema import (
 )
 from marl_vertiport.sim.physics import FlightPhysics
 from marl_vertiport.sim.reward import RewardModel
-from marl_vertiport.sim.geometry import swept_min_distance_pair
+from marl_vertiport.sim.geometry import swept_min_distances
 from marl_vertiport.sim.safety import (
     SCALAR_PAIRS_MAX, conflicting_pairs, planned_velocity, swept_distances_m,
 )
@@ -411,7 +411,7 @@ class VertiportSim:
         rm = self.reward_model
 
         # ---- safety term, from the state before anything moves (paper eqs. 3-5)
-        safety = rm.safety(bool(self.conflict[v]), a == acts.avoid)
+        safety = rm.safety(self.conflict.item(v), a == acts.avoid)
         info["conflict"] = safety != 0.0
 
         # ---- apply the action
@@ -471,13 +471,12 @@ class VertiportSim:
         self._update_delays()
 
         # ---- reward of the acting vehicle (paper's eq. 2)
-        lam, beta = self.battery_delay_terms(v)
+        lam, beta = rm.battery(self.battery.item(v)), rm.delay(self.delay.item(v))
         reward = rm.total(tau, gamma, lam, beta, safety)
         info["reward_terms"] = {"takeoff": tau, "landing": gamma, "battery": lam, "delay": beta,
                                 "safety": safety}
         metrics.steps += 1
         metrics.total_reward += reward
-        metrics.battery_sum += float(np.add.reduce(self.battery)) / self.n
         metrics.collisions += int(safety < 0)
         metrics.avoided_conflicts += int(safety > 0)
         metrics.action_counts[a] += 1
@@ -763,14 +762,18 @@ class VertiportSim:
         present = [s != AWAY for s in status]
         mover_set = set(movers)
         # Every pair of present vehicles with a mover in it, in sorted order.
-        pairs = [(a, b) for a in range(n) if present[a]
-                 for b in range(a + 1, n) if present[b] and (a in mover_set or b in mover_set)]
+        if len(movers) == 1:
+            m = movers[0]
+            pairs = [(o, m) if o < m else (m, o) for o in range(n) if o != m and present[o]]
+        else:
+            pairs = [(a, b) for a in range(n) if present[a]
+                     for b in range(a + 1, n) if present[b] and (a in mover_set or b in mover_set)]
         if not pairs:
             return 0, 0
         if len(pairs) > SCALAR_PAIRS_MAX:
             dmin = swept_distances_m(self.prev_pos, self.pos, pairs)
         else:
-            dmin = [swept_min_distance_pair(start[a], end[a], start[b], end[b]) for a, b in pairs]
+            dmin = swept_min_distances(start, end, pairs)
         sep = self.cfg.safety.min_separation_m
         losses = {pair for pair, d in zip(pairs, dmin) if d < sep}
         kept = {pair for pair in self.sep_state if pair[0] not in mover_set and pair[1] not in mover_set}
@@ -818,6 +821,10 @@ class VertiportSim:
         level = self.battery_model.apply(self.battery.tolist(), change)
         empty = [v for v, b in enumerate(level) if b <= 0.0 and _AIRBORNE[status_during[v]]]
         self.battery[:] = level
+        # The fleet's mean battery for the episode metric. Below 8 values numpy's sum adds them
+        # in order, as sum() does; from 8 on it adds pairwise, so it is asked itself.
+        total = sum(level) if self.n < 8 else float(np.add.reduce(self.battery))
+        self.metrics.battery_sum += total / self.n
         if not empty:
             return 0
         status = self.status.tolist()
@@ -947,14 +954,14 @@ class VertiportSim:
         :meth:`schedule_status` (which gives the same column), for 16 about the same cost."""
         if self._evtol_cache is None:
             status_code = self.schedule.status_code
-            minute = self.minute
             values: list[float] = []
-            for st, bat, pk, pt, rel, (ox, oy), (_, _, z), (vx, vy), d, c, nd in zip(
+            # _rel_min holds minute - pending_time, as of the last step.
+            for st, bat, pk, rel, (ox, oy), (_, _, z), (vx, vy), d, c, nd in zip(
                     self.status.tolist(), self.battery.tolist(), self.pending_kind.tolist(),
-                    self.pending_time.tolist(), self._rel_min.tolist(), self.obs_xy.tolist(),
+                    self._rel_min.tolist(), self.obs_xy.tolist(),
                     self.pos.tolist(), self.plan_vel_xy.tolist(), self.delay.tolist(),
                     self.conflict.tolist(), self.node.tolist()):
-                values += (st, bat, status_code(minute - pt, pk), ox, oy, z, vx, vy,
+                values += (st, bat, status_code(rel, pk), ox, oy, z, vx, vy,
                            -rel if pk != NO_OPERATION else 0.0, d, c, nd, 0.0)
             self._evtol_cache = np.array(values, dtype=np.float32).reshape(self.n, len(EVTOL_FEATURES))
         return self._evtol_cache

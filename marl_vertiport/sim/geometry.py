@@ -92,12 +92,24 @@ def swept_min_distance_pair(a0: tuple, a1: tuple, b0: tuple, b1: tuple) -> float
     """Scalar :func:`swept_min_distance` of one pair: vehicle A from ``a0`` to ``a1`` and B from
     ``b0`` to ``b1`` (3-tuples, metres) over the same interval. Cheaper than the array version
     for the few pairs of a small fleet."""
-    dx, dy, dz = a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2]
-    vx = (a1[0] - a0[0]) - (b1[0] - b0[0])
-    vy = (a1[1] - a0[1]) - (b1[1] - b0[1])
-    vz = (a1[2] - a0[2]) - (b1[2] - b0[2])
-    vv = vx * vx + vy * vy + vz * vz
-    t = 0.0
-    if vv > _EPS:
-        t = min(1.0, max(0.0, -(dx * vx + dy * vy + dz * vz) / vv))
-    return math.sqrt((dx + t * vx) ** 2 + (dy + t * vy) ** 2 + (dz + t * vz) ** 2)
+    return swept_min_distances((a0, b0), (a1, b1), ((0, 1),))[0]
+
+
+def swept_min_distances(start, end, pairs) -> list[float]:
+    """Scalar :func:`swept_min_distance` of many pairs: ``start`` and ``end`` hold each vehicle's
+    position (``[x, y, z]``, metres) at the start and the end of the interval, ``pairs`` the
+    ``(i, j)`` index pairs; one distance per pair, in order. For a few dozen pairs a loop over
+    Python floats is cheaper than the array version."""
+    out = []
+    for i, j in pairs:
+        a0, a1, b0, b1 = start[i], end[i], start[j], end[j]
+        dx, dy, dz = a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2]
+        vx = (a1[0] - a0[0]) - (b1[0] - b0[0])
+        vy = (a1[1] - a0[1]) - (b1[1] - b0[1])
+        vz = (a1[2] - a0[2]) - (b1[2] - b0[2])
+        vv = vx * vx + vy * vy + vz * vz
+        t = 0.0
+        if vv > _EPS:
+            t = min(1.0, max(0.0, -(dx * vx + dy * vy + dz * vz) / vv))
+        out.append(math.sqrt((dx + t * vx) ** 2 + (dy + t * vy) ** 2 + (dz + t * vz) ** 2))
+    return out

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from marl_vertiport.sim.geometry import (
-    cpa, segment_distance, swept_min_distance, swept_min_distance_pair,
+    cpa, segment_distance, swept_min_distance, swept_min_distances,
 )
 
 #: Above this many vehicle pairs the array version of the swept distance is cheaper.
@@ -76,5 +76,4 @@ def swept_distances_m(prev_pos: np.ndarray, pos: np.ndarray, pairs: list[tuple[i
         pi = np.fromiter((a for a, _ in pairs), dtype=np.int64, count=len(pairs))
         pj = np.fromiter((b for _, b in pairs), dtype=np.int64, count=len(pairs))
         return swept_min_distance(prev_pos, pos, pi, pj).tolist()
-    start, end = prev_pos.tolist(), pos.tolist()
-    return [swept_min_distance_pair(start[a], end[a], start[b], end[b]) for a, b in pairs]
+    return swept_min_distances(prev_pos.tolist(), pos.tolist(), pairs)
