@@ -31,7 +31,6 @@ class _EngineCallRecorder:
     def __init__(self, module: Any) -> None:
         self._module = module
         self.calls: list[tuple[Any, tuple, dict]] = []
-        self.clients: set[int] = set()
         #: The clients opened during the recording, in the order they were opened.
         self.connected: list[int] = []
 
@@ -39,16 +38,15 @@ class _EngineCallRecorder:
         attr = getattr(self._module, name)
         if not callable(attr) or isinstance(attr, type):  # constants and the error class
             return attr
-        calls, clients, connected = self.calls, self.clients, self.connected
+        calls, connected = self.calls, self.connected
         connect, disconnect = self._module.connect, self._module.disconnect
 
         def call(*args: Any, **kwargs: Any) -> Any:
             result = attr(*args, **kwargs)
             if attr is connect:
-                clients.add(result)
                 connected.append(result)
                 calls.append((attr, args, kwargs))
-            elif attr is not disconnect and kwargs.get("physicsClientId") in clients:
+            elif attr is not disconnect and kwargs.get("physicsClientId") in connected:
                 calls.append((attr, args, kwargs))
             return result
 

@@ -45,9 +45,8 @@ from marl_vertiport.sim.schema import (
 )
 from marl_vertiport.sim.physics import FlightPhysics
 from marl_vertiport.sim.reward import RewardModel
-from marl_vertiport.sim.geometry import swept_min_distances
 from marl_vertiport.sim.safety import (
-    SCALAR_PAIRS_MAX, conflicting_pairs, planned_velocity, swept_distances_m,
+    conflicting_pairs, planned_velocity, swept_distances_m,
 )
 from marl_vertiport.sim.schedule import FlightSchedule
 from marl_vertiport.sim.uncertainty import Uncertainty
@@ -471,7 +470,7 @@ class VertiportSim:
         self._update_delays()
 
         # ---- reward of the acting vehicle (paper's eq. 2)
-        lam, beta = rm.battery(self.battery.item(v)), rm.delay(self.delay.item(v))
+        lam, beta = self.battery_delay_terms(v)
         reward = rm.total(tau, gamma, lam, beta, safety)
         info["reward_terms"] = {"takeoff": tau, "landing": gamma, "battery": lam, "delay": beta,
                                 "safety": safety}
@@ -770,10 +769,7 @@ class VertiportSim:
                      for b in range(a + 1, n) if present[b] and (a in mover_set or b in mover_set)]
         if not pairs:
             return 0, 0
-        if len(pairs) > SCALAR_PAIRS_MAX:
-            dmin = swept_distances_m(self.prev_pos, self.pos, pairs)
-        else:
-            dmin = swept_min_distances(start, end, pairs)
+        dmin = swept_distances_m(self.prev_pos, self.pos, pairs, start, end)
         sep = self.cfg.safety.min_separation_m
         losses = {pair for pair, d in zip(pairs, dmin) if d < sep}
         kept = {pair for pair in self.sep_state if pair[0] not in mover_set and pair[1] not in mover_set}

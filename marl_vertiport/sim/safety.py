@@ -68,12 +68,16 @@ def conflicting_pairs(vehicles: Sequence[int], start: dict[int, XY], end: dict[i
     return pairs
 
 
-def swept_distances_m(prev_pos: np.ndarray, pos: np.ndarray, pairs: list[tuple[int, int]]
-                      ) -> list[float]:
+def swept_distances_m(prev_pos: np.ndarray, pos: np.ndarray, pairs: list[tuple[int, int]],
+                      prev_rows: list[list[float]] | None = None,
+                      rows: list[list[float]] | None = None) -> list[float]:
     """Per pair, the least distance (m) of the two vehicles over the step, both moving linearly
-    from ``prev_pos`` to ``pos`` (``(N, 3)`` each)."""
+    from ``prev_pos`` to ``pos`` (``(N, 3)`` each). ``prev_rows`` and ``rows``: the same
+    positions as lists, where the caller has them (the few pairs of a small fleet are measured
+    on lists, many on the arrays)."""
     if len(pairs) > SCALAR_PAIRS_MAX:
         pi = np.fromiter((a for a, _ in pairs), dtype=np.int64, count=len(pairs))
         pj = np.fromiter((b for _, b in pairs), dtype=np.int64, count=len(pairs))
         return swept_min_distance(prev_pos, pos, pi, pj).tolist()
-    return swept_min_distances(prev_pos.tolist(), pos.tolist(), pairs)
+    return swept_min_distances(prev_pos.tolist() if prev_rows is None else prev_rows,
+                               pos.tolist() if rows is None else rows, pairs)
