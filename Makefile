@@ -26,10 +26,11 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 
-# torch first, pinned to the CPU build, so nothing later pulls a CUDA build.
+# torch first, pinned to the CPU build, so nothing later pulls a CUDA build. The ray extra
+# (the ray backend) is installed too, so that `make test` runs its tests.
 $(STAMP): $(PY) pyproject.toml
 	$(PIP) install --quiet torch==2.13.0
-	$(PIP) install --quiet -e '.[test]'
+	$(PIP) install --quiet -e '.[test,ray]'
 	@touch $(STAMP)
 
 venv: $(STAMP)  ## create .venv and install the project with pinned dependencies

@@ -17,8 +17,9 @@ PACKAGES = ("marl_vertiport", "agents")
 LAYERS = (
     (0, ("marl_vertiport.config", "marl_vertiport.sim")),            # simulator core
     (1, ("marl_vertiport",)),                                         # env APIs
-    (2, ("agents.common", "agents.controllers", "agents.gcn")),       # controllers
-    (3, ("agents.evaluate",)),                                        # evaluation
+    (2, ("agents.common", "agents.execution", "agents.controllers",
+         "agents.gcn")),                                              # controllers
+    (3, ("agents.evaluate", "agents.sweep")),                         # evaluation
     (4, ("agents", "agents.gcn.train", "agents.train", "agents.render", "agents.bench",
          "agents.studies")),                                          # training and tools
 )

@@ -3,7 +3,7 @@ the paper's case-study and action-distribution charts, and a Markdown report.
 
 Every agent plays the same held-out days (``EVAL_SEEDS[:N]``) of every case through the AEC
 API; an episode is fully determined by (agent, case, seed), so the numbers do not depend on how
-many worker processes run them.
+many worker processes run them, nor on whether they run here or on a Ray cluster.
 
 Usage::
 
@@ -11,6 +11,8 @@ Usage::
     python -m agents.evaluate --agents random --episodes 3 --set schedule.episode_steps=60
     python -m agents.evaluate --agents random fcfs heuristic --out docs/results \\
         --report docs/results.md
+    python -m agents.evaluate --agents fcfs heuristic --episodes 1000 --backend ray \\
+        --ray-address auto        # on the Ray cluster this machine belongs to (docs/scaling.md)
 
 Outputs in ``--out``: ``episodes.csv``, ``summary.csv``, ``results.json``, ``case_study.png``,
 ``action_distribution.png`` (and the ``--report`` file). Exit codes: 0 done, 1 a controller or
@@ -33,12 +35,13 @@ from agents.common.seeds import parse_seed_range
 from agents.controllers.registry import agent_help
 from agents.evaluate.settings import (
     BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, DEFAULT_AGENTS, DEFAULT_CONFIGS, EvalSettings,
-    INTERRUPTED, InputError, load_suite, parse_overrides,
+    Evaluation, INTERRUPTED, InputError, load_suite, parse_overrides,
 )
 from agents.evaluate.episodes import close_envs
 from agents.evaluate.run import evaluate, validate
 from agents.evaluate.tables import format_table
 from agents.evaluate.report import write_outputs
+from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
 
 # ============================================================================ CLI
 
@@ -64,8 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "800000-999999 for development, test seeds >= 1000000 for "
                              "reported numbers; training seeds are refused)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
-                        help="worker processes; 1 runs in this process "
-                             "(default: the number of CPU cores, %(default)s)")
+                        help="local backend: worker processes, 1 runs in this process; ray "
+                             "backend: the CPUs of the Ray instance it starts when it joins no "
+                             "cluster (default: the number of CPU cores, %(default)s)")
+    add_backend_arguments(parser)
     parser.add_argument("--out", type=Path, default=Path("runs/eval"), metavar="DIR",
                         help="output folder, created if needed (default: %(default)s)")
     parser.add_argument("--report", type=Path, default=None, metavar="PATH",
@@ -119,6 +124,14 @@ def _unique(items: Iterable[str]) -> tuple[str, ...]:
     return tuple(dict.fromkeys(items))
 
 
+def run_on(backend: Backend, settings: EvalSettings, names: dict[str, list[str]],
+           progress: bool) -> Evaluation:
+    """Run the evaluation on ``backend``, saying where on stderr first."""
+    if progress:
+        print(f"{len(settings.tasks())} episodes on {backend.describe()}", file=sys.stderr)
+    return evaluate(settings, progress=progress, action_names=names, backend=backend)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line entry point; returns the exit code (0 ok, 1 failed mid-run, 2 bad input)."""
     args_list = list(sys.argv[1:] if argv is None else argv)
@@ -150,14 +163,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                                 bootstrap=args.bootstrap, bootstrap_seed=args.bootstrap_seed)
         if args.workers < 1:
             raise InputError(f"--workers must be >= 1, got {args.workers}")
+        if args.ray_address and args.backend != "ray":
+            raise InputError("--ray-address needs --backend ray")
         check_outputs(args.out, args.report)
         names = validate(settings)
-    except InputError as exc:
+        backend = backend_from_args(args, args.workers)
+    except (InputError, BackendError) as exc:
         close_envs()
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    evaluation = evaluate(settings, workers=args.workers, progress=not args.no_progress,
-                          action_names=names)
+    with backend:
+        evaluation = run_on(backend, settings, names, not args.no_progress)
     table = format_table(evaluation)
     if table:
         print(table)

@@ -1,26 +1,22 @@
-"""The execution layer: run episodes in this process or a pool of worker processes.
+"""Episodes as tasks of the execution layer (:mod:`agents.execution`): one episode per task, in
+this process, a pool of worker processes or on a Ray cluster.
 
-An episode's result depends only on its task (agent, case, seed), never on which process ran
-it or in what order."""
+An episode's result depends only on its task (agent, case, seed, overrides), never on which
+process or node ran it or in what order."""
 
 from __future__ import annotations
 
-import multiprocessing
-import signal
 import sys
 import time
-import traceback
-from pathlib import Path
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from agents.controllers.base import run_aec_episode
 from agents.controllers.registry import make_controller
-from agents.evaluate.settings import (
-    EpisodeRecord, EpisodeTask, EvalSettings, INTERRUPTED, Overrides,
-)
+from agents.evaluate.settings import EpisodeRecord, EpisodeTask, EvalSettings, Overrides
+from agents.execution import Backend, LocalBackend
+from agents.execution.base import raised_at
 
 # ============================================================================ worker side
 
@@ -62,21 +58,6 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def raised_at(exc: BaseException) -> str:
-    """``raised at FILE:LINE in FUNCTION`` of the innermost frame of ``exc``'s traceback (the
-    file relative to the working directory when it lies below it)."""
-    frames = traceback.extract_tb(exc.__traceback__)
-    if not frames:
-        return "raised at an unknown place"
-    last = frames[-1]
-    path = Path(last.filename)
-    try:
-        path = path.resolve().relative_to(Path.cwd())
-    except ValueError:
-        pass
-    return f"raised at {path}:{last.lineno} in {last.name}"
-
-
 def run_task(task: EpisodeTask) -> EpisodeRecord:
     """Run one episode with a fresh controller; errors come back in the record, not raised."""
     start = time.perf_counter()
@@ -95,12 +76,6 @@ def run_task(task: EpisodeTask) -> EpisodeRecord:
     return EpisodeRecord(task, metrics=plain, seconds=time.perf_counter() - start)
 
 
-def _worker_init() -> None:
-    """Workers ignore Ctrl-C: the parent stops handing out work and lets them finish."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-
 def _progress(total: int, enabled: bool) -> Any:
     from tqdm import tqdm
 
@@ -114,85 +89,46 @@ def _describe_failure(record: EpisodeRecord) -> str:
             f"(episode {t.episode}): {record.error}")
 
 
-def _run_serial(tasks: Sequence[EpisodeTask], on_done: Callable[[EpisodeRecord], bool]) -> None:
-    for task in tasks:
-        if not on_done(run_task(task)):
-            return
+def run_tasks(tasks: Sequence[EpisodeTask], backend: Backend | None = None,
+              progress: bool = True, label: Callable[[EpisodeTask], str] | None = None,
+              ) -> tuple[list[EpisodeRecord], str | None]:
+    """Run ``tasks`` on ``backend`` (default: this process); stop at the first failure.
 
+    Args:
+        label: what the progress bar shows for the last completed task (default: agent and
+            case).
 
-def _run_pool(tasks: Sequence[EpisodeTask], workers: int,
-              on_done: Callable[[EpisodeRecord], bool]) -> str | None:
-    """Run ``tasks`` on ``workers`` spawned processes; stop handing out work as soon as
-    ``on_done`` returns False. Returns an error message if the pool itself broke."""
-    ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
-    futures: list[Future] = []
-    seen: set[int] = set()
-    problem: str | None = None
-    try:
-        futures = [pool.submit(run_task, task) for task in tasks]
-        for i, fut in _completed_in_any_order(futures):
-            seen.add(i)
-            if not on_done(fut.result()):
-                break
-    except KeyboardInterrupt:
-        problem = INTERRUPTED
-    except Exception as exc:  # BrokenProcessPool: a worker died (crash, out of memory)
-        problem = f"a worker process failed: {type(exc).__name__}: {exc}"
-    finally:
-        for fut in futures:
-            fut.cancel()
-        pool.shutdown(wait=True, cancel_futures=True)
-    # Episodes that were already running when the run stopped finished: keep them.
-    for i, fut in enumerate(futures):
-        if i not in seen and fut.done() and not fut.cancelled() and fut.exception() is None:
-            on_done(fut.result())
-    return problem
-
-
-def _completed_in_any_order(futures: list[Future]) -> Iterable[tuple[int, Future]]:
-    index = {id(f): i for i, f in enumerate(futures)}
-    for fut in as_completed(futures):
-        yield index[id(fut)], fut
-
-
-def run_episodes(settings: EvalSettings, workers: int = 1,
-                 progress: bool = True) -> tuple[list[EpisodeRecord], str | None]:
-    """Run every episode of ``settings``; stop at the first failure.
-
-    Returns the completed episodes sorted by (agent, case, episode), and the error that stopped
-    the run (None if it ran to the end).
+    Returns:
+        The completed episodes in task order, and the error that stopped the run (None if it
+        ran to the end; :data:`INTERRUPTED` after Ctrl-C).
     """
-    tasks = settings.tasks()
-    done: list[EpisodeRecord] = []
+    backend = backend or LocalBackend(1)
+    done: dict[int, EpisodeRecord] = {}
     failure: list[str] = []
     bar = _progress(len(tasks), progress)
+    label = label or (lambda t: f"{t.agent} / {t.config}")
 
-    def on_done(record: EpisodeRecord) -> bool:
+    def on_result(i: int, record: EpisodeRecord) -> bool:
         if record.error is not None:
             if not failure:
                 failure.append(_describe_failure(record))
             return False
-        done.append(record)
-        bar.set_description(f"{record.task.agent} / {record.task.config}", refresh=False)
+        done[i] = record
+        bar.set_description(label(record.task), refresh=False)
         bar.update(1)
         return not failure
 
     try:
-        if workers <= 1:
-            try:
-                _run_serial(tasks, on_done)
-            except KeyboardInterrupt:
-                failure.append(INTERRUPTED)
-        else:
-            problem = _run_pool(tasks, min(workers, len(tasks)), on_done)
-            if problem and not failure:
-                failure.append(problem)
+        problem = backend.run(run_task, tasks, on_result)
     finally:
         bar.close()
-    order = {(a, c): (i, j) for i, a in enumerate(settings.agents)
-             for j, c in enumerate(settings.configs)}
-    done.sort(key=lambda r: (*order[(r.task.agent, r.task.config)], r.task.episode))
-    return done, (failure[0] if failure else None)
+    if problem and not failure:
+        failure.append(problem)
+    return [done[i] for i in sorted(done)], (failure[0] if failure else None)
 
 
+def run_episodes(settings: EvalSettings, backend: Backend | None = None,
+                 progress: bool = True) -> tuple[list[EpisodeRecord], str | None]:
+    """Run every episode of ``settings`` (see :func:`run_tasks`); the completed ones come back
+    sorted by (agent, case, episode)."""
+    return run_tasks(settings.tasks(), backend, progress)

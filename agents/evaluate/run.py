@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import time
 
-
 from agents.common.seeds import EVAL_SEEDS
 from agents.controllers.registry import AgentSpecError, make_controller
 from agents.evaluate.settings import EvalSettings, Evaluation, InputError
 from agents.evaluate.episodes import cached_env, close_envs, run_episodes
 from agents.evaluate.stats import scalar_metrics, summarize
+from agents.execution import Backend, LocalBackend
 
 def validate(settings: EvalSettings) -> dict[str, list[str]]:
     """Check every agent and case before anything runs; return each case's action names.
@@ -46,16 +46,18 @@ def validate(settings: EvalSettings) -> dict[str, list[str]]:
     return names
 
 
-
-
 def evaluate(settings: EvalSettings, workers: int = 1, progress: bool = True,
-             action_names: dict[str, list[str]] | None = None) -> Evaluation:
-    """Validate, run every episode and summarise. Raises :class:`InputError` on bad input."""
+             action_names: dict[str, list[str]] | None = None,
+             backend: Backend | None = None) -> Evaluation:
+    """Validate, run every episode and summarise. Raises :class:`InputError` on bad input.
+
+    The episodes run on ``backend`` (:mod:`agents.execution`), by default on ``workers`` local
+    processes (1: this process); the results do not depend on which."""
     if action_names is None:
         action_names = validate(settings)
     start = time.perf_counter()
     try:
-        records, error = run_episodes(settings, workers, progress)
+        records, error = run_episodes(settings, backend or LocalBackend(workers), progress)
     finally:
         close_envs()
     metrics = scalar_metrics(records)

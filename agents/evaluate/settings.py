@@ -10,6 +10,7 @@ from typing import Any, Iterable
 import yaml
 
 from agents.common.seeds import EVAL_SEEDS
+from agents.execution.base import INTERRUPTED  # noqa: F401 (the error of a run stopped with Ctrl-C)
 
 DEFAULT_AGENTS = ("random", "fcfs", "heuristic")
 #: The paper's case 1 (no uncertainty) and case 2 (wind gusts, charger and take-off failures).
@@ -20,8 +21,6 @@ CONFIDENCE = 0.95
 #: Episodes (from the first) whose action counts make the action-distribution chart.
 ACTION_EPISODES = 5
 
-#: The error of a run stopped with Ctrl-C (exit code 130 rather than 1).
-INTERRUPTED = "interrupted (Ctrl-C)"
 Overrides = tuple[tuple[str, Any], ...]
 
 

@@ -9,7 +9,8 @@ Teachers (``pretrain.teacher``):
   alone, at a fraction of a millisecond.
 - ``heuristic``: the expert dispatcher itself.
 
-Days of demonstrations run in worker processes, one day per task, through the Gymnasium env:
+Days of demonstrations run as tasks of the execution layer (:mod:`agents.execution`: local
+worker processes or a Ray cluster), one day per task, through the Gymnasium env:
 the acting eVTOL's observation there is exactly what that eVTOL observes as an AEC agent, so
 the same data trains the actor of both training modes. Each round runs ``days`` full days,
 ``starts`` shorter episodes of a day's first ``start_steps`` steps and ``low_battery_starts``
@@ -25,9 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -37,6 +36,7 @@ import torch
 from tensordict import TensorDict
 
 from agents.common.files import write_atomic
+from agents.execution import INTERRUPTED, Backend, LocalBackend
 from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
 from agents.gcn.padding import to_tensordict as padded_tensordict
@@ -146,37 +146,40 @@ def pad_day(data: dict[str, np.ndarray], max_nodes: int, max_evtols: int) -> dic
     return out
 
 
-def collect(tasks: list[DayTask], workers: int, log: Callable[[str], None], tag: str,
+def collect(tasks: list[DayTask], backend: Backend | int, log: Callable[[str], None], tag: str,
             sizes: tuple[int, int] | None = None
             ) -> tuple[dict[str, np.ndarray], list[dict[str, Any]]]:
-    """Run ``tasks`` on ``workers`` spawned processes (1: in this process), logging each day;
-    returns their decisions concatenated in task order and each task's metrics, the same for
-    any number of workers. ``sizes``: ``(max_nodes, max_evtols)`` to pad every day to (days
-    of different vertiports)."""
-    start = time.time()
-    results: list[tuple[dict[str, np.ndarray], dict[str, Any]]] = []
+    """Run ``tasks`` on ``backend`` (:mod:`agents.execution`; an int: that many local worker
+    processes, 1 in this process), logging each day; returns their decisions concatenated in
+    task order and each task's metrics, the same on any backend. ``sizes``: ``(max_nodes,
+    max_evtols)`` to pad every day to (days of different vertiports).
 
-    def report(result) -> None:
-        results.append(result)
+    Raises:
+        KeyboardInterrupt: Ctrl-C stopped the round (nothing of it is kept).
+        RuntimeError: a day failed, or a worker or node was lost for good.
+    """
+    if isinstance(backend, int):
+        backend = LocalBackend(backend)
+    start = time.time()
+    results: dict[int, tuple[dict[str, np.ndarray], dict[str, Any]]] = {}
+
+    def report(i: int, result) -> bool:
+        results[i] = result
         m = result[1]
         log(f"  {tag}: episode {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
             f"{m.get('steps', 0)} steps, reward {m.get('total_reward', float('nan')):.0f}, "
             f"lost {m.get('stranded_air', 0)} air / {m.get('stranded_ground', 0)} ground, "
             f"{len(result[0]['label'])} decisions")
+        return True
 
-    if workers <= 1:
-        for task in tasks:
-            report(label_day(task))
-        ordered = results
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = [pool.submit(label_day, t) for t in tasks]
-            for fut in as_completed(futures):
-                report(fut.result())
-            # In task order, not finishing order: the fit's data, and so the run, do not
-            # depend on which worker finished first.
-            ordered = [fut.result() for fut in futures]
+    problem = backend.run(label_day, tasks, report)
+    if problem == INTERRUPTED:
+        raise KeyboardInterrupt
+    if problem is not None:
+        raise RuntimeError(f"{tag}: {problem}")
+    # In task order, not finishing order: the fit's data, and so the run, do not depend on
+    # which worker finished first.
+    ordered = [results[i] for i in range(len(tasks))]
     days = [r[0] for r in ordered]
     if sizes is not None:
         days = [pad_day(d, *sizes) for d in days]
@@ -294,7 +297,8 @@ def day_score(metrics: dict[str, Any], lost_vehicle_penalty: float) -> float:
 def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                log: Callable[[str], None] = print,
                state_path: Path | None = None,
-               on_round: Callable[[dict[str, float]], None] | None = None) -> dict[str, float]:
+               on_round: Callable[[dict[str, float]], None] | None = None,
+               backend: Backend | None = None) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
     docstring); ``cfg`` is the :class:`~agents.gcn.train.pipeline.TrainConfig`.
 
@@ -312,7 +316,10 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     the file continues after its last round and gives the same result as a run never
     interrupted. ``on_round(record)`` receives, per round, the mean metrics of its full days
     (:data:`ROUND_METRICS`), who drove, the demonstration steps so far and the fit's loss; the
-    last round's record also names the round driven by the fit that is kept (``kept_round``)."""
+    last round's record also names the round driven by the fit that is kept (``kept_round``).
+
+    ``backend``: where the days run (default: ``pretrain.workers`` local processes); the
+    result does not depend on it."""
     pre = cfg.pretrain
     if pre.days <= 0 or pre.epochs <= 0:
         return {}
@@ -344,6 +351,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
             if on_round is not None:
                 on_round(record)
     stats, fits, scores = state["stats"], state["fits"], state["scores"]
+    backend = backend or LocalBackend(pre.workers)
+    where = backend.describe()
     for round_ in range(state["next_round"], pre.dagger_rounds + 2):
         last = round_ == pre.dagger_rounds + 1  # scores the last fit; nothing is refit
         learner = fits[-1] if fits else None
@@ -355,8 +364,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
             f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, "
             f"{'no labels' if last else f'the {pre.teacher} teacher labels'} "
-            f"({pre.workers} worker{'s' if pre.workers != 1 else ''})")
-        new, metrics = collect(tasks, pre.workers, log, tag, sizes)
+            f"({where})")
+        new, metrics = collect(tasks, backend, log, tag, sizes)
         full = [m for m in metrics if m["steps"] == pre.day_steps]
         days = [day_score(m, cfg.lost_vehicle_penalty) for m in full] or [float("nan")]
         if learner is None:

@@ -33,6 +33,7 @@ import torch
 import yaml
 
 from agents.common.files import write_atomic
+from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
 from agents.gcn.train.imitation import ROUND_METRICS, TEACHERS, warm_start
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
@@ -401,8 +402,13 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
 
 # ------------------------------------------------------------------------------ the run
 def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool = True,
-          log=print) -> Path:
-    """Train (or resume) in ``run_dir``; returns the final checkpoint's path."""
+          log=print, backend: Backend | None = None, backend_args: list[str] | None = None
+          ) -> Path:
+    """Train (or resume) in ``run_dir``; returns the final checkpoint's path.
+
+    ``backend`` runs the warm start's days (default: ``pretrain.workers`` local processes);
+    ``backend_args`` (such as ``["--backend", "ray"]``) are handed to the evaluation at the
+    end. Neither changes the result."""
     world_size = int(os.environ.get("WORLD_SIZE", "1"))
     if world_size > 1:
         # Under torchrun each rank takes its own GPU and its own episodes (rsl_rl's multi-GPU
@@ -454,7 +460,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         warm_envs = ([to_dict(c) for c in scenario_configs(cfg)] if cfg.scenarios
                      else to_dict(env_cfg))
         stats = warm_start(runner.alg.actor, cfg, warm_envs, log=log,
-                           state_path=state_path, on_round=on_round)
+                           state_path=state_path, on_round=on_round, backend=backend)
         if stats:
             runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
     remaining = cfg.iterations - runner.current_learning_iteration
@@ -540,7 +546,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
             f"seeds {seeds} (test seeds stay for reported numbers)")
         evaluated = time.time()
         evaluate_main(["--agents", str(final), *cfg.evaluation.agents, "--seeds", seeds,
-                       "--out", str(run_dir / "eval")])
+                       "--out", str(run_dir / "eval"), *(backend_args or [])])
         phases["evaluation"] = time.time() - evaluated
     log("time: " + ", ".join(f"{name} {sec / 60:.1f} min" for name, sec in phases.items())
         + f"; {(time.time() - started) / 60:.1f} min in all")
@@ -568,7 +574,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iterations", type=int, help="override the number of PPO iterations")
     parser.add_argument("--device", help="override the device (cpu, cuda, cuda:0)")
     parser.add_argument("--no-eval", action="store_true", help="skip the evaluation at the end")
+    add_backend_arguments(parser)
     args = parser.parse_args(argv)
+    backend = None
     try:
         if args.resume:
             run_dir = Path(args.resume)
@@ -586,9 +594,16 @@ def main(argv: list[str] | None = None) -> int:
             overrides["device"] = args.device
         if overrides:
             cfg = build_dataclass(TrainConfig, {**to_dict(cfg), **overrides})
-        final = train(cfg, run_dir, resume=bool(args.resume), evaluate=not args.no_eval)
-    except (ConfigError, FileNotFoundError, ValueError, TrainingDiverged) as exc:
+        backend = backend_from_args(args, cfg.pretrain.workers)
+        backend_args = ["--backend", args.backend] + (
+            ["--ray-address", args.ray_address] if args.ray_address else [])
+        final = train(cfg, run_dir, resume=bool(args.resume), evaluate=not args.no_eval,
+                      backend=backend, backend_args=backend_args)
+    except (ConfigError, FileNotFoundError, ValueError, TrainingDiverged, BackendError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2 if not isinstance(exc, TrainingDiverged) else 3
+    finally:
+        if backend is not None:
+            backend.close()
     print(f"done: {final}")
     return 0

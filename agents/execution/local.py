@@ -1,0 +1,98 @@
+"""The local backend: tasks in this process, or in a pool of spawned worker processes on this
+machine. Needs nothing beyond the project's own dependencies."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from typing import Any, Callable, Sequence
+
+from agents.execution.base import INTERRUPTED, Backend, OnResult, first_line, task_failure
+
+
+def _worker_init() -> None:
+    """Workers ignore Ctrl-C: the driver stops handing out work and lets them finish."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class LocalBackend(Backend):
+    """``workers`` processes (default: the CPU cores); 1 runs every task in this process."""
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = workers or os.cpu_count() or 1
+
+    @property
+    def slots(self) -> int:
+        return self.workers
+
+    def describe(self) -> str:
+        return ("local: this process" if self.workers == 1
+                else f"local: {self.workers} worker processes")
+
+    def run(self, fn: Callable[[Any], Any], tasks: Sequence[Any],
+            on_result: OnResult) -> str | None:
+        if self.workers <= 1 or len(tasks) <= 1:
+            return self._run_here(fn, tasks, on_result)
+        return self._run_pool(fn, tasks, on_result, min(self.workers, len(tasks)))
+
+    @staticmethod
+    def _run_here(fn: Callable[[Any], Any], tasks: Sequence[Any],
+                  on_result: OnResult) -> str | None:
+        for i, task in enumerate(tasks):
+            try:
+                result = fn(task)
+            except KeyboardInterrupt:
+                return INTERRUPTED
+            except Exception as exc:
+                return task_failure(i, exc)
+            try:
+                if not on_result(i, result):
+                    return None
+            except KeyboardInterrupt:
+                return INTERRUPTED
+        return None
+
+    @staticmethod
+    def _run_pool(fn: Callable[[Any], Any], tasks: Sequence[Any], on_result: OnResult,
+                  workers: int) -> str | None:
+        ctx = multiprocessing.get_context("spawn")
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
+        futures: list[Future] = []
+        index: dict[int, int] = {}
+        seen: set[int] = set()
+        problem: str | None = None
+        try:
+            futures = [pool.submit(fn, task) for task in tasks]
+            index = {id(f): i for i, f in enumerate(futures)}
+            for fut in as_completed(futures):
+                i = index[id(fut)]
+                seen.add(i)
+                exc = fut.exception()
+                if exc is not None:
+                    problem = _pool_failure(i, exc)
+                    break
+                if not on_result(i, fut.result()):
+                    break
+        except KeyboardInterrupt:
+            problem = INTERRUPTED
+        finally:
+            for fut in futures:
+                fut.cancel()
+            pool.shutdown(wait=True, cancel_futures=True)
+        # Tasks that were already running when the run stopped finished: hand them over.
+        for i, fut in enumerate(futures):
+            if i not in seen and fut.done() and not fut.cancelled() and fut.exception() is None:
+                on_result(i, fut.result())
+        return problem
+
+
+def _pool_failure(index: int, exc: BaseException) -> str:
+    from concurrent.futures.process import BrokenProcessPool
+
+    if isinstance(exc, BrokenProcessPool):  # a worker died (crash, out of memory)
+        return f"a worker process failed: {first_line(exc)}"
+    return task_failure(index, exc)
