@@ -15,8 +15,13 @@ EPISODES ?= 50
 CONFIGS  ?= paper paper_uncertain
 OUT      ?= runs/eval
 AGENT    ?= heuristic
+SWEEP    ?= wind
+# Where `evaluate`, `sweep` and `train` run their tasks: BACKEND=ray (Ray reads RAY_ADDRESS,
+# e.g. RAY_ADDRESS=auto to join a cluster started with `ray start --head`; docs/scaling.md).
+BACKEND  ?= local
+RUN_ON    = --backend $(BACKEND)
 
-.PHONY: help venv test test-fast fuzz soak train evaluate results render bench env-demo clean
+.PHONY: help venv test test-fast fuzz soak train evaluate sweep results render bench env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-10s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -51,14 +56,17 @@ fuzz: $(STAMP)  ## the property-based tests on many more examples (HYPOTHESIS_PR
 TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>)
-	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG))
+	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(RUN_ON)
 
 evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report
 ifdef SUITE
-	$(CLI) evaluate --suite $(SUITE) --out $(OUT)/$(notdir $(basename $(SUITE))) --report $(OUT)/$(notdir $(basename $(SUITE)))/report.md
+	$(CLI) evaluate --suite $(SUITE) --out $(OUT)/$(notdir $(basename $(SUITE))) --report $(OUT)/$(notdir $(basename $(SUITE)))/report.md $(RUN_ON)
 else
-	$(CLI) evaluate --agents $(AGENTS) --configs $(CONFIGS) --episodes $(EPISODES) --out $(OUT)
+	$(CLI) evaluate --agents $(AGENTS) --configs $(CONFIGS) --episodes $(EPISODES) --out $(OUT) $(RUN_ON)
 endif
+
+sweep: $(STAMP)  ## run the sweep SWEEP of configs/sweeps/ (default wind) into runs/sweeps/SWEEP: tidy CSV, figure with CIs (BACKEND=ray to use a cluster)
+	$(CLI) sweep $(SWEEP) --out runs/sweeps/$(notdir $(basename $(SWEEP))) $(RUN_ON)
 
 results: $(STAMP)  ## regenerate docs/results.md (50 days per uncertainty level), docs/results/transfer.md and docs/results/scaling.md (the suites)
 	$(CLI) evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md

@@ -3,6 +3,7 @@
 Commands (``marl-vertiport COMMAND --help`` for each one's options):
 
     evaluate      evaluate controllers on cases or a suite (tables, CIs, figures, report)
+    sweep         a grid of agents x cases x config overrides x days: tidy CSV and figure
     train         train the GCN ATC from a train config (warm start, PPO, evaluation)
     render        an animated GIF or MP4 of one episode of a controller
     bench         the speed and memory benchmark (docs/performance.md)
@@ -26,6 +27,7 @@ from collections.abc import Sequence
 #: Command -> (module whose ``main(argv)`` runs it, one-line help).
 COMMANDS = {
     "evaluate": ("agents.evaluate.cli", "evaluate controllers on cases or a suite"),
+    "sweep": ("agents.sweep.cli", "a grid of agents x cases x config overrides x days"),
     "train": ("agents.gcn.train.pipeline", "train the GCN ATC from a train config"),
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),

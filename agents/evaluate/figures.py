@@ -17,7 +17,8 @@ from agents.evaluate.stats import action_shares
 # ============================================================================ figures
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend (no display needed)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -26,7 +27,8 @@ def _pyplot() -> Any:
     return plt
 
 
-def _png(fig: Any) -> bytes:
+def png_bytes(fig: Any) -> bytes:
+    """The PNG of ``fig`` at the resolution of every chart of the project."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=130, bbox_inches="tight")
     return buf.getvalue()
@@ -39,7 +41,7 @@ def _case_colors(configs: Sequence[str]) -> dict[str, Any]:
 
 def case_study_figure(evaluation: Evaluation) -> bytes:
     """The paper's case-study chart: one panel per metric, bars per agent and case, 95 % CIs."""
-    plt = _pyplot()
+    plt = pyplot()
     s = evaluation.settings
     metrics = [m for m in FIGURE_METRICS if m in evaluation.metrics]
     ncols = 3
@@ -76,7 +78,7 @@ def case_study_figure(evaluation: Evaluation) -> bytes:
     fig.suptitle(f"Case study: mean per day over {n} evaluation days, error bars = "
                  f"{round(100 * s.confidence)} % bootstrap CI", fontsize=13, y=1.05)
     fig.tight_layout()
-    data = _png(fig)
+    data = png_bytes(fig)
     plt.close(fig)
     return data
 
@@ -84,7 +86,7 @@ def case_study_figure(evaluation: Evaluation) -> bytes:
 def action_distribution_figure(evaluation: Evaluation, episodes: int = ACTION_EPISODES) -> bytes:
     """The paper's action-distribution chart: share of each action per agent, cases side by
     side, over the first ``episodes`` evaluation episodes."""
-    plt = _pyplot()
+    plt = pyplot()
     s = evaluation.settings
     used = min(episodes, s.episodes)
     names: list[str] = []
@@ -126,7 +128,7 @@ def action_distribution_figure(evaluation: Evaluation, episodes: int = ACTION_EP
                  f"{'s' if used != 1 else ''} (seeds {seeds[0]}–{seeds[-1]})",
                  fontsize=13, y=1.04)
     fig.tight_layout()
-    data = _png(fig)
+    data = png_bytes(fig)
     plt.close(fig)
     return data
 

@@ -60,7 +60,8 @@ def format_table(evaluation: Evaluation) -> str:
 # ============================================================================ files
 
 
-def _csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+def csv_text(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    """CSV with a header line and ``\\n`` line ends."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
@@ -73,13 +74,13 @@ def episodes_csv(evaluation: Evaluation) -> str:
     header = ["agent", "config", "episode", "seed", *evaluation.metrics]
     rows = ([r.task.agent, r.task.config, r.task.episode, r.task.seed,
              *(r.metrics[m] for m in evaluation.metrics)] for r in evaluation.records)
-    return _csv_text(header, rows)
+    return csv_text(header, rows)
 
 
 def summary_csv(evaluation: Evaluation) -> str:
     """One row per agent x case x metric: mean, std, ci_low, ci_high, n."""
     header = ["agent", "config", "metric", "mean", "std", "ci_low", "ci_high", "n"]
-    return _csv_text(header, ([row[k] for k in header] for row in evaluation.summary))
+    return csv_text(header, ([row[k] for k in header] for row in evaluation.summary))
 
 
 def results_json(evaluation: Evaluation, command: str) -> str:

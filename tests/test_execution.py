@@ -1,0 +1,106 @@
+"""The execution layer (agents/execution/) without Ray: the local backend in this process and
+in a worker pool, stopping, a task that raises, the choice of backend, and the one-line error
+when the ray extra is missing."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from agents.execution import (
+    INTERRUPTED, RAY_EXTRA_HINT, BackendError, LocalBackend, make_backend,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # spawned workers import this module's functions by name
+    sys.path.insert(0, str(ROOT))
+
+
+def square(x: int) -> int:
+    return x * x
+
+
+def fails_on_three(x: int) -> int:
+    if x == 3:
+        raise ValueError("three is not allowed")
+    return x
+
+
+def _collect(backend, fn, tasks, stop_after=None):
+    got: dict[int, int] = {}
+
+    def on_result(i, result):
+        got[i] = result
+        return stop_after is None or len(got) < stop_after
+
+    return backend.run(fn, tasks, on_result), got
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_local_backend_hands_every_result_back_by_index(workers):
+    problem, got = _collect(LocalBackend(workers), square, list(range(7)))
+    assert problem is None and got == {i: i * i for i in range(7)}
+
+
+def test_a_stopped_run_hands_out_no_more_work():
+    problem, got = _collect(LocalBackend(1), square, list(range(7)), stop_after=2)
+    assert problem is None and got == {0: 0, 1: 1}
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_task_that_raises_is_named_in_one_line(workers):
+    problem, got = _collect(LocalBackend(workers), fails_on_three, [1, 2, 3, 4])
+    assert problem is not None and "\n" not in problem
+    assert problem.startswith("task 2 failed: ValueError: three is not allowed")
+    assert got.get(0) == 1 and 2 not in got
+
+
+def test_ctrl_c_in_the_driver_keeps_what_finished():
+    got: dict[int, int] = {}
+
+    def on_result(i, result):
+        got[i] = result
+        if len(got) == 2:
+            raise KeyboardInterrupt
+        return True
+
+    assert LocalBackend(1).run(square, list(range(5)), on_result) == INTERRUPTED
+    assert got == {0: 0, 1: 1}
+
+
+def test_choice_of_backend_and_its_errors():
+    assert isinstance(make_backend("local", 3), LocalBackend) and make_backend("local", 3).slots == 3
+    assert make_backend("local", 1).describe() == "local: this process"
+    with pytest.raises(BackendError, match="--ray-address needs --backend ray"):
+        make_backend("local", 1, "auto")
+    with pytest.raises(BackendError, match="use one of local, ray"):
+        make_backend("dask")
+    with pytest.raises(BackendError, match="--workers must be >= 1"):
+        make_backend("local", 0)
+
+
+@pytest.fixture
+def no_ray(monkeypatch):
+    """``import ray`` fails as it does where the extra is not installed."""
+    monkeypatch.setitem(sys.modules, "ray", None)
+
+
+def test_missing_ray_extra_is_one_line_saying_how_to_install_it(no_ray, tmp_path, capsys):
+    with pytest.raises(BackendError) as err:
+        make_backend("ray")
+    assert str(err.value) == f"the ray backend needs the optional ray extra: {RAY_EXTRA_HINT}"
+    assert "pip install -e '.[ray]'" in str(err.value)
+    from agents.evaluate.cli import main as evaluate_main
+    from agents.sweep.cli import main as sweep_main
+
+    for main, argv in ((evaluate_main, ["--agents", "random", "--episodes", "1"]),
+                       (sweep_main, ["wind", "--episodes", "1"])):
+        capsys.readouterr()
+        code = main([*argv, "--backend", "ray", "--out", str(tmp_path / "out"), "--no-progress"])
+        err_lines = capsys.readouterr().err.strip().splitlines()
+        assert code == 2
+        assert err_lines == [f"error: the ray backend needs the optional ray extra: "
+                             f"{RAY_EXTRA_HINT}"]
+    assert not (tmp_path / "out").exists()  # nothing was run or written
