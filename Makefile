@@ -16,12 +16,14 @@ CONFIGS  ?= paper paper_uncertain
 OUT      ?= runs/eval
 AGENT    ?= heuristic
 SWEEP    ?= wind
+CURVES   ?= scratch
+SEEDS    ?= 3
 # Where `evaluate`, `sweep` and `train` run their tasks: BACKEND=ray (Ray reads RAY_ADDRESS,
 # e.g. RAY_ADDRESS=auto to join a cluster started with `ray start --head`; docs/scaling.md).
 BACKEND  ?= local
 RUN_ON    = --backend $(BACKEND)
 
-.PHONY: help venv test test-fast fuzz soak train evaluate sweep results render bench env-demo clean
+.PHONY: help venv test test-fast fuzz soak train curves evaluate sweep results render bench env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-10s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -57,6 +59,9 @@ TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>)
 	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(RUN_ON)
+
+curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), 95 % intervals over seeds, baselines as lines (runs/curves/)
+	$(CLI) curves --configs $(CURVES) --seeds $(SEEDS) $(RUN_ON)
 
 evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report
 ifdef SUITE

@@ -5,6 +5,7 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     evaluate      evaluate controllers on cases or a suite (tables, CIs, figures, report)
     sweep         a grid of agents x cases x config overrides x days: tidy CSV and figure
     train         train the GCN ATC from a train config (warm start, PPO, evaluation)
+    curves        learning curves over training seeds, with intervals and baselines
     render        an animated GIF or MP4 of one episode of a controller
     bench         the speed and memory benchmark (docs/performance.md)
     capacity      the charger study: where the charging ports' minutes go, vehicles lost
@@ -29,6 +30,7 @@ COMMANDS = {
     "evaluate": ("agents.evaluate.cli", "evaluate controllers on cases or a suite"),
     "sweep": ("agents.sweep.cli", "a grid of agents x cases x config overrides x days"),
     "train": ("agents.gcn.train.pipeline", "train the GCN ATC from a train config"),
+    "curves": ("agents.curves.cli", "learning curves over training seeds"),
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),
     "capacity": ("agents.studies.capacity", "the charger study"),

@@ -419,7 +419,7 @@ def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):
         all(p.requires_grad for p in self.actor.parameters())) or {})
     alg = WarmupPPO.__new__(WarmupPPO)  # the update logic alone, without rsl_rl's set-up
     alg.actor = torch.nn.Linear(2, 2)
-    alg.critic_warmup_updates, alg.updates_done = 2, 0
+    alg.critic_warmup_updates, alg.updates_done, alg.schedule = 2, 0, "fixed"
     for _ in range(4):
         alg.update()
     assert seen == [False, False, True, True]
@@ -427,6 +427,28 @@ def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):
     alg.updates_done, alg.critic_warmup_updates = 5, 3  # resumed past the warm-up: untouched
     alg.update()
     assert seen[-1] is True
+
+
+def test_linear_schedule_decays_the_learning_rate_to_zero_over_the_run(monkeypatch):
+    from rsl_rl.algorithms import PPO
+
+    from agents.gcn.train.ppo import WarmupPPO
+
+    rates = []
+    monkeypatch.setattr(PPO, "update", lambda self: rates.append(
+        (self.learning_rate, self.optimizer.param_groups[0]["lr"])) or {})
+    alg = WarmupPPO.__new__(WarmupPPO)
+    alg.actor = torch.nn.Linear(2, 2)
+    alg.optimizer = torch.optim.Adam(alg.actor.parameters(), lr=1e-3)
+    alg.critic_warmup_updates, alg.updates_done, alg.schedule = 0, 0, "linear"
+    alg.initial_learning_rate, alg.total_updates = 1e-3, 4
+    for _ in range(4):
+        alg.update()
+    assert [r for r, _ in rates] == pytest.approx([1e-3, 7.5e-4, 5e-4, 2.5e-4])
+    assert all(a == b for a, b in rates)  # the optimiser uses the rate it reports
+    alg.updates_done = 2  # a resumed run picks the schedule up where it stopped
+    alg.update()
+    assert rates[-1][0] == pytest.approx(5e-4)
 
 
 def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path, capsys):

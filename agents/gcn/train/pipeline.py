@@ -112,7 +112,13 @@ class AlgorithmConfig:
     value_loss_coef: float = 1.0
     max_grad_norm: float = 1.0
     schedule: str = "adaptive"
+    """``adaptive`` (rsl_rl: the rate follows the KL divergence toward ``desired_kl``),
+    ``fixed``, or ``linear`` (decays linearly to 0 over the run's iterations)."""
     desired_kl: float = 0.01
+    use_clipped_value_loss: bool = True
+    """rsl_rl's value clipping: a value may move at most ``clip_param`` (in reward units) from
+    its rollout estimate in an update; with returns of hundreds it all but stops the critic."""
+    normalize_advantage_per_mini_batch: bool = False
 
 
 @dataclass(frozen=True)
@@ -156,6 +162,17 @@ class TrainConfig:
     team_reward: bool = True
     """Multi-agent mode: every eVTOL's row gets the step's reward (cooperative); False credits
     only the acting eVTOL (per-agent returns, which reward selfish use of the charger)."""
+    rows: str = "agents"
+    """Multi-agent mode: ``agents`` (a row per env copy and eVTOL; the rows whose eVTOL has no
+    turn only "stay") or ``turns`` (a row per copy: the eVTOL whose turn it is); see
+    agents/gcn/train/vec_env.py."""
+    critic: str = "state"
+    """Multi-agent mode: ``state`` (the centralised critic reads ``state()``) or
+    ``observation`` (each eVTOL's critic reads its own observation, shared weights). The
+    single-agent mode's critic always reads the observation."""
+    reward_scale: float = 1.0
+    """The learner's reward (after the lost-vehicle penalty) is multiplied by this; metrics and
+    evaluation keep the paper's reward."""
     critic_warmup_iterations: int = 0
     """First PPO iterations with the actor frozen, so that the critic fits the warm-started
     policy before its advantages move the actor."""
@@ -174,7 +191,14 @@ class TrainConfig:
             (self.torch_threads >= 1, "torch_threads", "must be >= 1"),
             (self.algorithm.learning_rate > 0, "algorithm.learning_rate", "must be > 0"),
             (0 <= self.algorithm.gamma <= 1, "algorithm.gamma", "must lie in [0, 1]"),
-            (self.algorithm.schedule in ("adaptive", "fixed"), "algorithm.schedule", "adaptive or fixed"),
+            (self.algorithm.schedule in ("adaptive", "fixed", "linear"), "algorithm.schedule",
+             "adaptive, fixed or linear"),
+            (self.rows in ("agents", "turns"), "rows", "agents or turns"),
+            (self.critic in ("state", "observation"), "critic", "state or observation"),
+            (self.rows == "agents" or self.team_reward, "rows",
+             "turns holds one stream of turns per copy: it needs team_reward: true"),
+            (self.reward_scale > 0 and math.isfinite(self.reward_scale), "reward_scale",
+             "must be a finite number > 0"),
             (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
              "pretrain", "days, epochs and dagger_rounds must be >= 0"),
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
@@ -211,7 +235,7 @@ def load_train_config(config: str | Path) -> TrainConfig:
 # ------------------------------------------------------------------------------ rsl_rl wiring
 def runner_config(cfg: TrainConfig) -> dict[str, Any]:
     """The ``train_cfg`` dict of rsl_rl's ``OnPolicyRunner``."""
-    centralised_critic = cfg.mode == "multi_agent"
+    centralised_critic = cfg.mode == "multi_agent" and cfg.critic == "state"
     model = {"hidden": cfg.model.hidden, "hidden_dims": list(cfg.model.hidden_dims)}
     return {
         "num_steps_per_env": cfg.num_steps_per_env,
@@ -221,7 +245,8 @@ def runner_config(cfg: TrainConfig) -> dict[str, Any]:
         "obs_groups": {"actor": list(POLICY_GROUPS),
                        "critic": list(STATE_GROUPS if centralised_critic else POLICY_GROUPS)},
         "algorithm": {"class_name": "agents.gcn.train.ppo:WarmupPPO", **to_dict(cfg.algorithm),
-                      "critic_warmup_updates": cfg.critic_warmup_iterations},
+                      "critic_warmup_updates": cfg.critic_warmup_iterations,
+                      "total_updates": cfg.iterations},
         "actor": {"class_name": "agents.gcn.models:GraphActor", "feature_names": feature_names("observation"),
                   "mask_group": "action_mask",
                   "distribution_cfg": {"class_name": "agents.gcn.distribution:MaskedCategorical"}, **model},
@@ -241,9 +266,11 @@ def make_vec_env(cfg: TrainConfig):
     if cfg.mode == "multi_agent":
         return MultiAgentVecEnv(scenario_configs(cfg), num_envs=cfg.num_envs, device=cfg.device,
                                 seed=cfg.seed, team_reward=cfg.team_reward,
-                                lost_vehicle_penalty=cfg.lost_vehicle_penalty)
+                                lost_vehicle_penalty=cfg.lost_vehicle_penalty, rows=cfg.rows,
+                                critic=cfg.critic, reward_scale=cfg.reward_scale)
     return SingleAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device, seed=cfg.seed,
-                             lost_vehicle_penalty=cfg.lost_vehicle_penalty)
+                             lost_vehicle_penalty=cfg.lost_vehicle_penalty,
+                             reward_scale=cfg.reward_scale)
 
 
 class TrainingDiverged(RuntimeError):

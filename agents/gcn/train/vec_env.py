@@ -19,14 +19,29 @@ the paper's reward minus the penalty for each vehicle lost in the step (stranded
 on the ground, the step's ``info["vehicles_lost"]``): a documented training term; the episode
 metrics keep the paper's reward.
 
-**Multi-agent** (:class:`MultiAgentVecEnv`, CTDE): the PettingZoo AEC env, one row per (copy,
-eVTOL), ``R = K * N``. Each step every copy advances one AEC step: the acting eVTOL's row acts
-on its own observation; the other rows of that copy get a mask with only "stay" legal, their
-action is ignored (probability 1, so no policy gradient). By default every row of a copy gets
-the reward of the step (the team reward: the eVTOLs cooperate toward the fleet's total, as the
-ATC does); with ``team_reward=False`` only the acting row gets it, so each row's return is that
-eVTOL's own reward stream. Values are judged by the critic on the global state. supersuit's vector wrappers need parallel envs with every agent acting each step;
-the turn-based AEC env is stepped here directly, in process.
+**Multi-agent** (:class:`MultiAgentVecEnv`, CTDE): the PettingZoo AEC env, stepped here directly,
+in process (supersuit's vector wrappers need parallel envs with every agent acting each step).
+Each step every copy advances one AEC step, in which the eVTOL whose turn it is acts on its own
+observation with the shared actor. Two row layouts:
+
+- ``rows="agents"``: one row per (copy, eVTOL), ``R = K * N``. The other rows of a copy get a
+  mask with only "stay" legal and their action is ignored (probability 1, so no policy
+  gradient). By default every row of a copy gets the reward of the step (the team reward: the
+  eVTOLs cooperate toward the fleet's total, as the ATC does); with ``team_reward=False`` only
+  the acting row gets it, so each row's return is that eVTOL's own reward stream.
+- ``rows="turns"``: one row per copy, ``R = K``, holding the observation of the eVTOL whose turn
+  it is: the AEC game's turns as one stream, each with the step's (team) reward. With the team
+  reward this is the ``agents`` layout without its rows that cannot act: the same advantages at
+  the acting rows, for ``1 / N`` of the model's work.
+
+The critic reads ``critic="state"``: the global ``state()`` (the centralised critic), or
+``critic="observation"``: the observation of the row's eVTOL (independent critics with shared
+weights). With ``"observation"`` the state groups are not built at all, so nothing of the
+state can reach a model.
+
+**Reward scale** (``reward_scale``, both modes): the learner's reward (after the lost-vehicle
+penalty) is multiplied by it, so that returns and values are of order one; metrics keep the
+paper's reward.
 
 **Single agent** (:class:`SingleAgentVecEnv`, fully centralised): the Gymnasium env vectorised
 with supersuit (``gym_vec_env_v0``; with ``multiprocessing=True`` each copy runs in its own
@@ -62,9 +77,13 @@ class _VertiportVecEnv(VecEnv):
     """What both adapters share: config, row bookkeeping, action conversion, episode extras."""
 
     def __init__(self, config: str | EnvConfig, num_envs: int, rows_per_env: int,
-                 device: str = "cpu", seed: int = 0, lost_vehicle_penalty: float = 0.0) -> None:
+                 device: str = "cpu", seed: int = 0, lost_vehicle_penalty: float = 0.0,
+                 reward_scale: float = 1.0) -> None:
+        if not (reward_scale > 0 and np.isfinite(reward_scale)):
+            raise ValueError(f"reward_scale must be a finite number > 0, got {reward_scale}")
         self.env_config = load_config(config)
         self.lost_vehicle_penalty = float(lost_vehicle_penalty)
+        self.reward_scale = float(reward_scale)
         self.num_copies = int(num_envs)
         self.rows_per_env = rows_per_env
         self.num_envs = self.num_copies * rows_per_env
@@ -110,20 +129,39 @@ class MultiAgentVecEnv(_VertiportVecEnv):
 
     Args:
         config: the env config, or a list of them (scenarios, cycled over the copies).
+        rows: ``"agents"`` (a row per copy and eVTOL) or ``"turns"`` (a row per copy: the eVTOL
+            whose turn it is).
+        critic: what the critic's groups hold: ``"state"`` (the global state) or
+            ``"observation"`` (none: the critic reads the row's observation groups).
     """
+
+    ROWS = ("agents", "turns")
+    CRITICS = ("state", "observation")
 
     def __init__(self, config: str | EnvConfig | list = "paper", num_envs: int = 8,
                  device: str = "cpu", seed: int = 0, team_reward: bool = True,
-                 lost_vehicle_penalty: float = 0.0) -> None:
+                 lost_vehicle_penalty: float = 0.0, rows: str = "agents",
+                 critic: str = "state", reward_scale: float = 1.0) -> None:
         from marl_vertiport.vertiport_v0 import raw_env
 
+        if rows not in self.ROWS:
+            raise ValueError(f"rows must be one of {self.ROWS}, got {rows!r}")
+        if critic not in self.CRITICS:
+            raise ValueError(f"critic must be one of {self.CRITICS}, got {critic!r}")
+        if rows == "turns" and not team_reward:
+            raise ValueError("rows='turns' holds one stream of turns per copy, which has only "
+                             "the team reward: team_reward=False needs rows='agents'")
         configs = [load_config(c) for c in (config if isinstance(config, (list, tuple)) else [config])]
         if not configs:
             raise ValueError("MultiAgentVecEnv needs at least one env config")
         max_n = max(c.fleet_size for c in configs)
-        super().__init__(configs[0], num_envs, max_n, device, seed, lost_vehicle_penalty)
+        self.turn_rows = rows == "turns"
+        self.with_state = critic == "state"
+        super().__init__(configs[0], num_envs, 1 if self.turn_rows else max_n, device, seed,
+                         lost_vehicle_penalty, reward_scale)
         self.scenarios = configs
         self.cfg["env_config"] = [c.name for c in configs]
+        self.cfg.update(rows=rows, critic=critic)
         self.team_reward = team_reward
         self.envs = [raw_env(config=configs[k % len(configs)]) for k in range(self.num_copies)]
         for env in self.envs:
@@ -133,20 +171,23 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         n, p = max_n, max(sim.layout.n_nodes for sim in sims)
         self.max_nodes, self.max_evtols = p, n
         a = ActionLayout(p).n
-        k = self.num_copies
-        st = self.envs[0].state()
+        k, r = self.num_copies, self.rows_per_env
         self._buf = {
-            "port_nodes": np.zeros((k, n, p, len(PORT_FEATURES)), np.float32),
-            "evtol_nodes": np.zeros((k, n, n, len(EVTOL_FEATURES)), np.float32),
-            "self": np.zeros((k, n, len(SELF_FEATURES)), np.float32),
-            "action_mask": np.zeros((k, n, a), np.int8),
-            "state_port_nodes": np.zeros((k, n, p, st["port_nodes"].shape[-1]), np.float32),
-            "state_evtol_nodes": np.zeros((k, n, n, st["evtol_nodes"].shape[-1]), np.float32),
-            "state_clock": np.zeros((k, n) + st["clock"].shape, np.float32),
+            "port_nodes": np.zeros((k, r, p, len(PORT_FEATURES)), np.float32),
+            "evtol_nodes": np.zeros((k, r, n, len(EVTOL_FEATURES)), np.float32),
+            "self": np.zeros((k, r, len(SELF_FEATURES)), np.float32),
+            "action_mask": np.zeros((k, r, a), np.int8),
         }
+        if self.with_state:
+            st = self.envs[0].state()
+            self._buf.update({
+                "state_port_nodes": np.zeros((k, r, p, st["port_nodes"].shape[-1]), np.float32),
+                "state_evtol_nodes": np.zeros((k, r, n, st["evtol_nodes"].shape[-1]), np.float32),
+                "state_clock": np.zeros((k, r) + st["clock"].shape, np.float32),
+            })
         if self.padded:
-            self._buf["port_valid"] = np.zeros((k, n, p), bool)
-            self._buf["evtol_valid"] = np.zeros((k, n, n), bool)
+            self._buf["port_valid"] = np.zeros((k, r, p), bool)
+            self._buf["evtol_valid"] = np.zeros((k, r, n), bool)
             for c, sim in enumerate(sims):
                 self._buf["port_valid"][c, :, : sim.layout.n_nodes] = True
                 self._buf["evtol_valid"][c, :, : sim.n] = True
@@ -160,23 +201,31 @@ class MultiAgentVecEnv(_VertiportVecEnv):
     def _observe_copy(self, k: int) -> None:
         env, buf = self.envs[k], self._buf
         sim = env.sim
-        n, p = sim.n, sim.layout.n_nodes
-        state = sim.state_arrays()
-        # The state's port columns 0-3 are the observation's port features; padded rows and
-        # the rows of absent eVTOLs stay zero.
-        buf["port_nodes"][k, :, :p] = state["port_nodes"][:, : buf["port_nodes"].shape[-1]]
+        n, p, v = sim.n, sim.layout.n_nodes, sim.acting
+        # Padded rows and the rows of absent eVTOLs stay zero.
+        buf["port_nodes"][k, :, :p] = sim.port_nodes()
         base = sim._evtol_base()
         evtol = buf["evtol_nodes"][k]
         evtol[:, :n] = base
-        evtol[:, :n, self._is_self] = self._eye[:, :n]
-        buf["self"][k, :n] = base[:, : self._n_self]
-        masks = buf["action_mask"][k]
-        masks[:] = self._noop_mask
-        masks[sim.acting] = pad_action_mask(sim.action_mask(sim.acting), p, self.max_nodes)
+        mask = pad_action_mask(sim.action_mask(v), p, self.max_nodes)
+        if self.turn_rows:  # the one row is the acting eVTOL's
+            evtol[0, v, self._is_self] = 1.0
+            buf["self"][k, 0] = base[v, : self._n_self]
+            buf["action_mask"][k, 0] = mask
+        else:
+            evtol[:, :n, self._is_self] = self._eye[:, :n]
+            buf["self"][k, :n] = base[:, : self._n_self]
+            masks = buf["action_mask"][k]
+            masks[:] = self._noop_mask
+            masks[v] = mask
+        if not self.with_state:
+            return
+        state = sim.state_arrays()  # is_self marks the acting eVTOL
         buf["state_port_nodes"][k, :, :p] = state["port_nodes"]
         st_evtol = buf["state_evtol_nodes"][k]
         st_evtol[:, :n] = state["evtol_nodes"]
-        st_evtol[:, :n, self._is_self] = self._eye[:, :n]
+        if not self.turn_rows:
+            st_evtol[:, :n, self._is_self] = self._eye[:, :n]
         buf["state_clock"][k] = state["clock"]
 
     def _observe_all(self) -> TensorDict:
@@ -189,6 +238,8 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         return self._obs.clone()
 
     def acting_rows(self) -> torch.Tensor:
+        if self.turn_rows:
+            return torch.arange(self.num_envs)
         return torch.tensor([k * self.rows_per_env + env.sim.acting for k, env in enumerate(self.envs)])
 
     def step(self, actions: torch.Tensor):
@@ -199,9 +250,11 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         for k, env in enumerate(self.envs):
             sim = env.sim
             v = sim.acting
-            env.step(from_padded_action(int(acts[k, v]), sim.layout.n_nodes, self.max_nodes))
+            row = 0 if self.turn_rows else v
+            env.step(from_padded_action(int(acts[k, row]), sim.layout.n_nodes, self.max_nodes))
             agent = env.possible_agents[v]
             reward = env.rewards[agent] - self.lost_vehicle_penalty * env.infos[agent]["vehicles_lost"]
+            reward *= self.reward_scale
             if self.team_reward:
                 rewards[k] = reward  # every eVTOL of the copy shares the fleet's reward
             else:
@@ -229,13 +282,14 @@ class SingleAgentVecEnv(_VertiportVecEnv):
     """One row per env copy, vectorised with supersuit; see the module docstring."""
 
     def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
-                 seed: int = 0, multiprocessing: bool = False, lost_vehicle_penalty: float = 0.0) -> None:
+                 seed: int = 0, multiprocessing: bool = False, lost_vehicle_penalty: float = 0.0,
+                 reward_scale: float = 1.0) -> None:
         import supersuit as ss
 
         from marl_vertiport.gym_env import VertiportEnv
 
         cfg = load_config(config)
-        super().__init__(cfg, num_envs, 1, device, seed, lost_vehicle_penalty)
+        super().__init__(cfg, num_envs, 1, device, seed, lost_vehicle_penalty, reward_scale)
         # multiprocessing: one worker process per copy (gymnasium's AsyncVectorEnv with shared
         # memory; supersuit's concat_vec_envs cannot concatenate nested Dict observations).
         self.venv = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies,
@@ -261,6 +315,8 @@ class SingleAgentVecEnv(_VertiportVecEnv):
         if self.lost_vehicle_penalty:
             lost = np.asarray(info.get("vehicles_lost", np.zeros(len(done))), dtype=np.float32)
             rewards = np.asarray(rewards, dtype=np.float32) - self.lost_vehicle_penalty * lost
+        if self.reward_scale != 1.0:
+            rewards = np.asarray(rewards, dtype=np.float32) * self.reward_scale
         extras: dict[str, Any] = {"time_outs": torch.from_numpy(np.asarray(truncated)).to(self.device)}
         if done.any() and "episode" in info:
             ep = info["episode"]

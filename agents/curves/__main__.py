@@ -1,0 +1,5 @@
+import sys
+
+from agents.curves.cli import main
+
+sys.exit(main())

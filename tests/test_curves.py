@@ -1,0 +1,82 @@
+"""The curves command (python -m agents.curves, make curves) on a tiny budget: short days so
+that training days end within two iterations, two seeds, a baseline on two validation days."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.curves.cli import main
+from agents.curves.outputs import iqm, iqm_ci
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+def _write_configs(tmp_path):
+    env = tmp_path / "short_day.yaml"
+    env.write_text("base: paper\nname: short_day\nschedule:\n  episode_steps: 8\n")
+    train = tmp_path / "tiny.yaml"
+    train.write_text(
+        f"mode: multi_agent\nrows: turns\ncritic: state\nenv_config: {env}\n"
+        "num_envs: 2\nnum_steps_per_env: 8\niterations: 5\nsave_interval: 1\n"
+        "reward_scale: 0.05\npretrain:\n  days: 0\nmodel:\n  hidden: 8\n  hidden_dims: [8]\n"
+        "evaluation:\n  episodes: 0\n")
+    return train
+
+
+def test_curves_command_writes_one_row_per_seed_and_iteration_and_the_figure(tmp_path, capsys):
+    train = _write_configs(tmp_path)
+    out = tmp_path / "out"
+    code = main(["--configs", str(train), "--seeds", "2", "--iterations", "2", "--workers", "1",
+                 "--baselines", "fcfs", "--baseline-episodes", "2", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    with open(out / "curves.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [(r["config"], r["seed"], r["iteration"]) for r in rows] == [
+        ("tiny", "0", "0"), ("tiny", "0", "1"), ("tiny", "1", "0"), ("tiny", "1", "1")]
+    assert all(r["env_steps"] == str(16 * (int(r["iteration"]) + 1)) for r in rows)
+    assert all(np.isfinite(float(r["total_reward"])) for r in rows)  # a day ends every iteration
+    # The two seeds learn different things from different days.
+    assert rows[0]["total_reward"] != rows[2]["total_reward"]
+    with open(out / "summary.csv") as fh:
+        summary = [r for r in csv.DictReader(fh) if r["metric"] == "total_reward"]
+    assert [r["iteration"] for r in summary] == ["0", "1"]
+    for r in summary:
+        values = [float(x["total_reward"]) for x in rows if x["iteration"] == r["iteration"]]
+        assert float(r["mean"]) == pytest.approx(np.mean(values))
+        assert float(r["ci_low"]) <= float(r["mean"]) <= float(r["ci_high"])
+        assert r["seeds"] == "2"
+    assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with open(out / "baselines.csv") as fh:
+        base = [r for r in csv.DictReader(fh) if r["metric"] == "total_reward"]
+    assert [(b["agent"], b["scenarios"], b["days"]) for b in base] == [("fcfs", str(tmp_path / "short_day.yaml"), "2")]
+    meta = json.loads((out / "curves.json").read_text())
+    assert meta["complete"] and meta["seeds"] == [0, 1]
+    assert meta["baseline_days"] == "validation seeds 800000:800002"
+    assert meta["configs"]["tiny"]["iterations"] == 2
+    assert [(r["config"], r["seed"]) for r in meta["runs"]] == [("tiny", 0), ("tiny", 1)]
+    for run in meta["runs"]:  # each run's folder holds its config, with its seed
+        saved = Path(run["run_dir"]) / "train_config.yaml"
+        assert f"seed: {run['seed']}" in saved.read_text()
+
+
+def test_curves_command_refuses_bad_input_before_running(tmp_path, capsys):
+    train = _write_configs(tmp_path)
+    assert main(["--configs", str(train), "--seeds", "0", "--out", str(tmp_path / "o")]) == 2
+    assert "--seeds must be >= 1" in capsys.readouterr().err
+    assert main(["--configs", str(tmp_path / "missing.yaml"), "--out", str(tmp_path / "o")]) == 2
+    assert "missing.yaml" in capsys.readouterr().err
+    assert main(["--configs", str(train), "--baselines", "nobody", "--out", str(tmp_path / "o")]) == 2
+    assert "nobody" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_iqm_drops_the_lowest_and_highest_quarter():
+    assert iqm(np.array([0.0, 1.0, 2.0, 3.0, 100.0, -100.0, 1.5, 2.5])) == pytest.approx(1.75)
+    assert iqm(np.array([1.0, 2.0, 9.0])) == pytest.approx(4.0)  # fewer than 4: the mean
+    low, high = iqm_ci([1.0, 2.0, 3.0, 4.0, 5.0], resamples=200)
+    assert 1.0 <= low <= 3.0 <= high <= 5.0

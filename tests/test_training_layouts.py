@@ -1,0 +1,113 @@
+"""The multi-agent training layouts: rows per turn (the acting eVTOL of each copy) against
+rows per eVTOL, the reward scale, and the independent critics that read only the observation
+groups (no ``state()``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
+from agents.gcn.train.pipeline import TrainConfig, runner_config
+from agents.gcn.train.vec_env import MultiAgentVecEnv
+from marl_vertiport.config import ConfigError, build_dataclass, to_dict
+
+
+def _actions_of(env: MultiAgentVecEnv, rng: np.random.Generator) -> torch.Tensor:
+    obs = env.get_observations()
+    legal = [np.flatnonzero(m) for m in obs["action_mask"].numpy()]
+    return torch.tensor([[float(rng.choice(a))] for a in legal])
+
+
+def test_turn_rows_hold_the_acting_evtols_observation_and_state_and_the_step_reward():
+    env = MultiAgentVecEnv("paper", num_envs=2, seed=3, rows="turns", reward_scale=0.5)
+    rng = np.random.default_rng(0)
+    assert env.num_envs == 2
+    for _ in range(60):
+        obs = env.get_observations()
+        for k, copy in enumerate(env.envs):
+            agent = copy.agent_selection
+            seen = copy.observe(agent)
+            assert torch.equal(obs["port_nodes"][k], torch.from_numpy(seen["observation"]["port_nodes"]))
+            assert torch.equal(obs["evtol_nodes"][k], torch.from_numpy(seen["observation"]["evtol_nodes"]))
+            assert torch.equal(obs["self"][k], torch.from_numpy(seen["observation"]["self"]))
+            assert torch.equal(obs["action_mask"][k], torch.from_numpy(seen["action_mask"]).bool())
+            state = copy.state()
+            for group in ("port_nodes", "evtol_nodes", "clock"):
+                assert torch.equal(obs[f"state_{group}"][k], torch.from_numpy(state[group]))
+        actions = _actions_of(env, rng)
+        acting = [copy.agent_selection for copy in env.envs]
+        _, rewards, _, _ = env.step(actions)
+        for k, copy in enumerate(env.envs):
+            assert copy.infos[acting[k]]["action"] == int(actions[k])
+            assert float(rewards[k]) == pytest.approx(0.5 * copy.rewards[acting[k]])
+    env.close()
+
+
+def test_turn_rows_are_the_acting_rows_of_the_agent_rows():
+    """Driven by the same actions, the two layouts play the same days; the turn rows are the
+    agent rows of the acting eVTOLs, with the same rewards."""
+    turns = MultiAgentVecEnv("paper", num_envs=3, seed=7, rows="turns")
+    agents = MultiAgentVecEnv("paper", num_envs=3, seed=7, rows="agents")
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        a_obs = agents.get_observations()
+        t_obs = turns.get_observations()
+        rows = agents.acting_rows()
+        for key in t_obs.keys():
+            assert torch.equal(t_obs[key], a_obs[key][rows]), key
+        actions = _actions_of(turns, rng)
+        full = torch.zeros(agents.num_envs, 1)
+        full[rows] = actions
+        _, t_rew, t_done, _ = turns.step(actions)
+        _, a_rew, a_done, _ = agents.step(full)
+        assert torch.equal(t_rew, a_rew[rows]) and torch.equal(t_done, a_done[rows])
+    turns.close()
+    agents.close()
+
+
+def test_independent_critics_read_no_state_group():
+    """critic: observation builds the critic on the observation groups alone, and the vec env
+    builds no state group at all; a critic that read one would change with it."""
+    from rsl_rl.runners import OnPolicyRunner
+
+    base = to_dict(TrainConfig())
+    base.update(mode="multi_agent", rows="turns", critic="observation", num_envs=2,
+                num_steps_per_env=4, iterations=1, pretrain={"days": 0},
+                evaluation={"episodes": 0, "agents": []})
+    cfg = build_dataclass(TrainConfig, base)
+    rc = runner_config(cfg)
+    assert rc["obs_groups"]["critic"] == list(POLICY_GROUPS)
+    assert rc["critic"]["feature_names"]["evtols"] == rc["actor"]["feature_names"]["evtols"]
+    env = MultiAgentVecEnv("paper", num_envs=2, seed=0, rows="turns", critic="observation")
+    obs = env.get_observations()
+    assert not any(key.startswith("state_") for key in obs.keys())
+    runner = OnPolicyRunner(env, rc, log_dir=None, device="cpu")
+    critic = runner.alg.critic
+    assert not set(critic.obs_groups) & set(STATE_GROUPS)
+    values = critic(obs)
+    # The same observation with state groups added (garbage): the critic's values do not move.
+    garbage = {g: torch.full((2,) + s, float("nan")) for g, s in
+               (("state_port_nodes", (10, 5)), ("state_evtol_nodes", (4, 17)), ("state_clock", (3,)))}
+    with_state = TensorDict({**{k: obs[k] for k in obs.keys()}, **garbage}, batch_size=[2])
+    assert torch.equal(critic(with_state), values)
+    # The centralised critic does read them.
+    central = runner_config(build_dataclass(TrainConfig, {**base, "critic": "state"}))
+    assert central["obs_groups"]["critic"] == list(STATE_GROUPS)
+    env.close()
+
+
+def test_layout_options_are_checked():
+    base = to_dict(TrainConfig())
+    with pytest.raises(ConfigError, match="rows"):
+        build_dataclass(TrainConfig, {**base, "rows": "diagonal"})
+    with pytest.raises(ConfigError, match="critic"):
+        build_dataclass(TrainConfig, {**base, "critic": "oracle"})
+    with pytest.raises(ConfigError, match="team_reward"):
+        build_dataclass(TrainConfig, {**base, "rows": "turns", "team_reward": False})
+    with pytest.raises(ConfigError, match="reward_scale"):
+        build_dataclass(TrainConfig, {**base, "reward_scale": 0.0})
+    with pytest.raises(ValueError, match="rows"):
+        MultiAgentVecEnv("paper", num_envs=1, rows="diagonal")
