@@ -111,3 +111,34 @@ def test_layout_options_are_checked():
         build_dataclass(TrainConfig, {**base, "reward_scale": 0.0})
     with pytest.raises(ValueError, match="rows"):
         MultiAgentVecEnv("paper", num_envs=1, rows="diagonal")
+
+
+@pytest.mark.parametrize("mode", ["multi_agent", "single_agent"])
+def test_conflict_penalty_is_charged_exactly_on_unresolved_conflicts(mode):
+    """The learner's reward differs from the paper's (scaled) by the penalty in the steps whose
+    acting eVTOL left a predicted conflict unresolved (S = -5, which the day's ``collisions``
+    metric counts), and nowhere else."""
+    from agents.gcn.train.vec_env import SingleAgentVecEnv
+
+    def make(penalty):
+        if mode == "multi_agent":
+            return MultiAgentVecEnv("paper", num_envs=2, seed=1, rows="turns", reward_scale=0.5,
+                                    conflict_penalty=penalty)
+        return SingleAgentVecEnv("paper", num_envs=2, seed=1, reward_scale=0.5,
+                                 conflict_penalty=penalty)
+
+    plain, charged = make(0.0), make(10.0)
+    rng = np.random.default_rng(0)
+    charged_steps = 0
+    for _ in range(1400):  # within the first day: no copy resets
+        actions = _actions_of(charged, rng)
+        _, r_plain, _, _ = plain.step(actions)
+        _, r_charged, _, _ = charged.step(actions)
+        diff = r_plain - r_charged
+        assert torch.all((diff.abs() < 1e-5) | ((diff - 5.0).abs() < 1e-5)), diff
+        charged_steps += int(((diff - 5.0).abs() < 1e-5).sum())
+    sims = ([copy.sim for copy in charged.envs] if mode == "multi_agent"
+            else [copy.sim for copy in charged.venv.envs])
+    assert charged_steps == sum(sim.metrics.collisions for sim in sims) >= 1
+    plain.close()
+    charged.close()

@@ -170,6 +170,10 @@ class TrainConfig:
     """Multi-agent mode: ``state`` (the centralised critic reads ``state()``) or
     ``observation`` (each eVTOL's critic reads its own observation, shared weights). The
     single-agent mode's critic always reads the observation."""
+    conflict_penalty: float = 0.0
+    """Subtracted from the reward the learner sees in a step whose acting eVTOL was in a
+    predicted conflict and did not avoid it (the paper's S = -5, counted as a collision);
+    evaluation reports the paper's reward. 0: none."""
     reward_scale: float = 1.0
     """The learner's reward (after the lost-vehicle penalty) is multiplied by this; metrics and
     evaluation keep the paper's reward."""
@@ -199,6 +203,7 @@ class TrainConfig:
              "turns holds one stream of turns per copy: it needs team_reward: true"),
             (self.reward_scale > 0 and math.isfinite(self.reward_scale), "reward_scale",
              "must be a finite number > 0"),
+            (self.conflict_penalty >= 0, "conflict_penalty", "must be >= 0"),
             (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
              "pretrain", "days, epochs and dagger_rounds must be >= 0"),
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
@@ -267,10 +272,11 @@ def make_vec_env(cfg: TrainConfig):
         return MultiAgentVecEnv(scenario_configs(cfg), num_envs=cfg.num_envs, device=cfg.device,
                                 seed=cfg.seed, team_reward=cfg.team_reward,
                                 lost_vehicle_penalty=cfg.lost_vehicle_penalty, rows=cfg.rows,
-                                critic=cfg.critic, reward_scale=cfg.reward_scale)
+                                critic=cfg.critic, reward_scale=cfg.reward_scale,
+                                conflict_penalty=cfg.conflict_penalty)
     return SingleAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device, seed=cfg.seed,
                              lost_vehicle_penalty=cfg.lost_vehicle_penalty,
-                             reward_scale=cfg.reward_scale)
+                             reward_scale=cfg.reward_scale, conflict_penalty=cfg.conflict_penalty)
 
 
 class TrainingDiverged(RuntimeError):

@@ -39,6 +39,10 @@ The critic reads ``critic="state"``: the global ``state()`` (the centralised cri
 weights). With ``"observation"`` the state groups are not built at all, so nothing of the
 state can reach a model.
 
+**Unresolved-conflict penalty** (``conflict_penalty``, both modes): subtracted from the learner's
+reward in a step whose acting eVTOL was in a predicted conflict and did not avoid it (the
+paper's ``S = -5``, which the evaluation counts as a collision): a documented training term.
+
 **Reward scale** (``reward_scale``, both modes): the learner's reward (after the lost-vehicle
 penalty) is multiplied by it, so that returns and values are of order one; metrics keep the
 paper's reward.
@@ -78,11 +82,12 @@ class _VertiportVecEnv(VecEnv):
 
     def __init__(self, config: str | EnvConfig, num_envs: int, rows_per_env: int,
                  device: str = "cpu", seed: int = 0, lost_vehicle_penalty: float = 0.0,
-                 reward_scale: float = 1.0) -> None:
+                 reward_scale: float = 1.0, conflict_penalty: float = 0.0) -> None:
         if not (reward_scale > 0 and np.isfinite(reward_scale)):
             raise ValueError(f"reward_scale must be a finite number > 0, got {reward_scale}")
         self.env_config = load_config(config)
         self.lost_vehicle_penalty = float(lost_vehicle_penalty)
+        self.conflict_penalty = float(conflict_penalty)
         self.reward_scale = float(reward_scale)
         self.num_copies = int(num_envs)
         self.rows_per_env = rows_per_env
@@ -141,7 +146,8 @@ class MultiAgentVecEnv(_VertiportVecEnv):
     def __init__(self, config: str | EnvConfig | list = "paper", num_envs: int = 8,
                  device: str = "cpu", seed: int = 0, team_reward: bool = True,
                  lost_vehicle_penalty: float = 0.0, rows: str = "agents",
-                 critic: str = "state", reward_scale: float = 1.0) -> None:
+                 critic: str = "state", reward_scale: float = 1.0,
+                 conflict_penalty: float = 0.0) -> None:
         from marl_vertiport.vertiport_v0 import raw_env
 
         if rows not in self.ROWS:
@@ -158,7 +164,7 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         self.turn_rows = rows == "turns"
         self.with_state = critic == "state"
         super().__init__(configs[0], num_envs, 1 if self.turn_rows else max_n, device, seed,
-                         lost_vehicle_penalty, reward_scale)
+                         lost_vehicle_penalty, reward_scale, conflict_penalty)
         self.scenarios = configs
         self.cfg["env_config"] = [c.name for c in configs]
         self.cfg.update(rows=rows, critic=critic)
@@ -253,7 +259,10 @@ class MultiAgentVecEnv(_VertiportVecEnv):
             row = 0 if self.turn_rows else v
             env.step(from_padded_action(int(acts[k, row]), sim.layout.n_nodes, self.max_nodes))
             agent = env.possible_agents[v]
-            reward = env.rewards[agent] - self.lost_vehicle_penalty * env.infos[agent]["vehicles_lost"]
+            info = env.infos[agent]
+            reward = env.rewards[agent] - self.lost_vehicle_penalty * info["vehicles_lost"]
+            if info["reward_terms"]["safety"] < 0:
+                reward -= self.conflict_penalty
             reward *= self.reward_scale
             if self.team_reward:
                 rewards[k] = reward  # every eVTOL of the copy shares the fleet's reward
@@ -283,13 +292,14 @@ class SingleAgentVecEnv(_VertiportVecEnv):
 
     def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
                  seed: int = 0, multiprocessing: bool = False, lost_vehicle_penalty: float = 0.0,
-                 reward_scale: float = 1.0) -> None:
+                 reward_scale: float = 1.0, conflict_penalty: float = 0.0) -> None:
         import supersuit as ss
 
         from marl_vertiport.gym_env import VertiportEnv
 
         cfg = load_config(config)
-        super().__init__(cfg, num_envs, 1, device, seed, lost_vehicle_penalty, reward_scale)
+        super().__init__(cfg, num_envs, 1, device, seed, lost_vehicle_penalty, reward_scale,
+                         conflict_penalty)
         # multiprocessing: one worker process per copy (gymnasium's AsyncVectorEnv with shared
         # memory; supersuit's concat_vec_envs cannot concatenate nested Dict observations).
         self.venv = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies,
@@ -315,6 +325,9 @@ class SingleAgentVecEnv(_VertiportVecEnv):
         if self.lost_vehicle_penalty:
             lost = np.asarray(info.get("vehicles_lost", np.zeros(len(done))), dtype=np.float32)
             rewards = np.asarray(rewards, dtype=np.float32) - self.lost_vehicle_penalty * lost
+        if self.conflict_penalty and "reward_terms" in info:  # absent in a step of resets
+            safety = np.asarray(info["reward_terms"]["safety"], dtype=np.float32)
+            rewards = np.asarray(rewards, dtype=np.float32) - self.conflict_penalty * (safety < 0)
         if self.reward_scale != 1.0:
             rewards = np.asarray(rewards, dtype=np.float32) * self.reward_scale
         extras: dict[str, Any] = {"time_outs": torch.from_numpy(np.asarray(truncated)).to(self.device)}
