@@ -23,6 +23,14 @@ def training_seed(index: int) -> int:
     return index % TRAINING_SEED_END
 
 
+def evaluation_seeds(episodes: int, first_seed: int | None = None) -> tuple[int, ...]:
+    """The days of an evaluation: ``first_seed .. first_seed + episodes - 1`` when a first seed
+    is given (a ``--seeds`` range), else the first ``episodes`` of :data:`EVAL_SEEDS`."""
+    if first_seed is not None:
+        return tuple(range(first_seed, first_seed + episodes))
+    return tuple(EVAL_SEEDS[:episodes])
+
+
 def parse_seed_range(text: str) -> range:
     """``"START:STOP"`` (stop excluded) as a range of evaluation seeds; a range that reaches
     into the training seeds, or an empty or malformed one, raises ``ValueError``."""

@@ -130,10 +130,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if out.exists() and not out.is_dir():
             raise ConfigError(f"--out {out}: a file is in the way of the output folder")
         seeds = list(range(args.first_seed, args.first_seed + args.seeds))
-        from agents.controllers.registry import make_controller
+        from agents.evaluate.run import check_agent
 
         for agent in args.baselines:
-            make_controller(agent)  # an unknown or malformed agent fails here, before any run
+            check_agent(agent)
         backend = backend_from_args(args, args.workers)
     except (ConfigError, BackendError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -11,6 +11,22 @@ from agents.evaluate.episodes import cached_env, close_envs, run_episodes
 from agents.evaluate.stats import scalar_metrics, summarize
 from agents.execution import Backend, LocalBackend
 
+def check_agent(spec: str) -> None:
+    """Build the controller of agent ``spec`` once, before anything runs.
+
+    Raises:
+        InputError: an unknown agent, an import path that does not load, or a controller
+            whose construction failed, named.
+    """
+    try:
+        make_controller(spec)
+    except AgentSpecError as exc:
+        raise InputError(str(exc)) from None
+    except Exception as exc:  # the class loaded but could not be built
+        raise InputError(f"agent {spec!r}: building the controller failed: "
+                         f"{type(exc).__name__}: {exc}") from None
+
+
 def validate(settings: EvalSettings) -> dict[str, list[str]]:
     """Check every agent and case before anything runs; return each case's action names.
 
@@ -28,13 +44,7 @@ def validate(settings: EvalSettings) -> dict[str, list[str]]:
     if not settings.agents or not settings.configs:
         raise InputError("at least one agent and one config are needed")
     for spec in settings.agents:
-        try:
-            make_controller(spec)
-        except AgentSpecError as exc:
-            raise InputError(str(exc)) from None
-        except Exception as exc:  # the class loaded but could not be built
-            raise InputError(f"agent {spec!r}: building the controller failed: "
-                             f"{type(exc).__name__}: {exc}") from None
+        check_agent(spec)
     names: dict[str, list[str]] = {}
     for config in settings.configs:
         try:

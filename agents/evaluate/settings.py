@@ -9,7 +9,7 @@ from typing import Any, Iterable
 
 import yaml
 
-from agents.common.seeds import EVAL_SEEDS
+from agents.common.seeds import evaluation_seeds
 from agents.execution.base import INTERRUPTED  # noqa: F401 (the error of a run stopped with Ctrl-C)
 
 DEFAULT_AGENTS = ("random", "fcfs", "heuristic")
@@ -81,9 +81,7 @@ class EvalSettings:
 
     @property
     def seeds(self) -> tuple[int, ...]:
-        if self.first_seed is not None:
-            return tuple(range(self.first_seed, self.first_seed + self.episodes))
-        return tuple(EVAL_SEEDS[: self.episodes])
+        return evaluation_seeds(self.episodes, self.first_seed)
 
     @property
     def seeds_rule(self) -> str:

@@ -28,9 +28,10 @@ from typing import Any, Sequence
 
 import yaml
 
-from agents.controllers.registry import AgentSpecError, agent_help, make_controller
+from agents.controllers.registry import agent_help
 from agents.evaluate.cli import check_outputs
 from agents.evaluate.episodes import close_envs, run_tasks
+from agents.evaluate.run import check_agent
 from agents.evaluate.settings import INTERRUPTED, InputError, parse_overrides
 from agents.evaluate.tables import format_interval
 from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
@@ -108,13 +109,7 @@ def validate(spec: SweepSpec) -> None:
     from marl_vertiport.config import ConfigError, load_config
 
     for agent in spec.agents:
-        try:
-            make_controller(agent)
-        except AgentSpecError as exc:
-            raise InputError(str(exc)) from None
-        except Exception as exc:  # the class loaded but could not be built
-            raise InputError(f"agent {agent!r}: building the controller failed: "
-                             f"{type(exc).__name__}: {exc}") from None
+        check_agent(agent)
     for config in spec.configs:
         for point in spec.points():
             try:

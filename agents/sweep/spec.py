@@ -25,7 +25,7 @@ from typing import Any
 
 import yaml
 
-from agents.common.seeds import EVAL_SEEDS, parse_seed_range
+from agents.common.seeds import EVAL_SEEDS, evaluation_seeds, parse_seed_range
 from agents.evaluate.settings import EpisodeTask, InputError, Overrides
 
 SWEEP_DIR = Path(__file__).resolve().parents[2] / "configs" / "sweeps"
@@ -57,9 +57,7 @@ class SweepSpec:
 
     @property
     def seeds(self) -> tuple[int, ...]:
-        if self.first_seed is not None:
-            return tuple(range(self.first_seed, self.first_seed + self.episodes))
-        return tuple(EVAL_SEEDS[: self.episodes])
+        return evaluation_seeds(self.episodes, self.first_seed)
 
     @property
     def seeds_rule(self) -> str:
