@@ -13,8 +13,6 @@ import pytest
 from agents.curves.cli import main
 from agents.curves.outputs import iqm, iqm_ci
 
-pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
-
 
 def _write_configs(tmp_path):
     env = tmp_path / "short_day.yaml"

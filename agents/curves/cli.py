@@ -170,8 +170,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         backend.close()
     result.seconds = time.perf_counter() - start
-    files = write_outputs(result, out, command)
-    for row in final_rows(summary_rows(result)):
+    summary = summary_rows(result)
+    files = write_outputs(result, out, command, summary)
+    for row in final_rows(summary):
         print(f"{row['config']:>24s} {row['metric']:>14s} at {row['env_steps']:>9,d} steps: "
               f"mean {row['mean']:9.2f} [{row['ci_low']:.2f}, {row['ci_high']:.2f}], "
               f"IQM {row['iqm']:9.2f} [{row['iqm_low']:.2f}, {row['iqm_high']:.2f}], "

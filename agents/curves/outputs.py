@@ -73,7 +73,9 @@ def iqm_ci(values: Sequence[float], resamples: int = BOOTSTRAP_RESAMPLES,
     if x.size == 1 or np.all(x == x[0]):
         return float(x[0]), float(x[0])
     rng = np.random.default_rng(seed)
-    stats = [iqm(x[rng.integers(0, x.size, x.size)]) for _ in range(resamples)]
+    samples = np.sort(x[rng.integers(0, x.size, size=(resamples, x.size))], axis=1)
+    cut = x.size // 4  # as iqm(), on every resample at once
+    stats = samples[:, cut: x.size - cut].mean(axis=1)
     alpha = (1.0 - confidence) / 2.0
     low, high = np.quantile(stats, [alpha, 1.0 - alpha])
     return float(low), float(high)
@@ -197,10 +199,13 @@ def curves_json(result: CurvesResult, command: str) -> str:
     }, indent=2)
 
 
-def write_outputs(result: CurvesResult, out: Path, command: str) -> list[Path]:
-    """Write every file of the study into ``out``; returns their paths."""
+def write_outputs(result: CurvesResult, out: Path, command: str,
+                  summary: list[dict[str, Any]] | None = None) -> list[Path]:
+    """Write every file of the study into ``out`` (``summary``: :func:`summary_rows` of
+    ``result``, computed here when not given); returns their paths."""
     out.mkdir(parents=True, exist_ok=True)
-    summary = summary_rows(result)
+    if summary is None:
+        summary = summary_rows(result)
     header = ["config", "iteration", "env_steps", "metric", "seeds", "mean", "ci_low", "ci_high",
               "iqm", "iqm_low", "iqm_high"]
     files = {

@@ -322,14 +322,15 @@ class SingleAgentVecEnv(_VertiportVecEnv):
         self.episode_length_buf += 1
         self.episode_length_buf[dones_t] = 0
         self._obs = self._convert(obs)
+        rewards = np.asarray(rewards, dtype=np.float32)
         if self.lost_vehicle_penalty:
             lost = np.asarray(info.get("vehicles_lost", np.zeros(len(done))), dtype=np.float32)
-            rewards = np.asarray(rewards, dtype=np.float32) - self.lost_vehicle_penalty * lost
+            rewards = rewards - self.lost_vehicle_penalty * lost
         if self.conflict_penalty and "reward_terms" in info:  # absent in a step of resets
             safety = np.asarray(info["reward_terms"]["safety"], dtype=np.float32)
-            rewards = np.asarray(rewards, dtype=np.float32) - self.conflict_penalty * (safety < 0)
+            rewards = rewards - self.conflict_penalty * (safety < 0)
         if self.reward_scale != 1.0:
-            rewards = np.asarray(rewards, dtype=np.float32) * self.reward_scale
+            rewards = rewards * self.reward_scale
         extras: dict[str, Any] = {"time_outs": torch.from_numpy(np.asarray(truncated)).to(self.device)}
         if done.any() and "episode" in info:
             ep = info["episode"]
