@@ -43,8 +43,8 @@ state can reach a model.
 reward in a step whose acting eVTOL was in a predicted conflict and did not avoid it (the
 paper's ``S = -5``, which the evaluation counts as a collision): a documented training term.
 
-**Reward scale** (``reward_scale``, both modes): the learner's reward (after the lost-vehicle
-penalty) is multiplied by it, so that returns and values are of order one; metrics keep the
+**Reward scale** (``reward_scale``, both modes): the learner's reward (after the penalties) is
+multiplied by it, so that returns and values are of order one; metrics keep the
 paper's reward.
 
 **Single agent** (:class:`SingleAgentVecEnv`, fully centralised): the Gymnasium env vectorised
@@ -208,8 +208,11 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         env, buf = self.envs[k], self._buf
         sim = env.sim
         n, p, v = sim.n, sim.layout.n_nodes, sim.acting
-        # Padded rows and the rows of absent eVTOLs stay zero.
-        buf["port_nodes"][k, :, :p] = sim.port_nodes()
+        state = sim.state_arrays() if self.with_state else None  # is_self marks the acting eVTOL
+        # The state's port columns 0-3 are the observation's port features; padded rows and
+        # the rows of absent eVTOLs stay zero.
+        buf["port_nodes"][k, :, :p] = (sim.port_nodes() if state is None
+                                       else state["port_nodes"][:, : buf["port_nodes"].shape[-1]])
         base = sim._evtol_base()
         evtol = buf["evtol_nodes"][k]
         evtol[:, :n] = base
@@ -224,9 +227,8 @@ class MultiAgentVecEnv(_VertiportVecEnv):
             masks = buf["action_mask"][k]
             masks[:] = self._noop_mask
             masks[v] = mask
-        if not self.with_state:
+        if state is None:
             return
-        state = sim.state_arrays()  # is_self marks the acting eVTOL
         buf["state_port_nodes"][k, :, :p] = state["port_nodes"]
         st_evtol = buf["state_evtol_nodes"][k]
         st_evtol[:, :n] = state["evtol_nodes"]
