@@ -38,6 +38,7 @@ from agents.gcn.train.imitation import ROUND_METRICS, TEACHERS, warm_start
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
 from agents.gcn.train.log_writer import register_listener, unregister_listener
+from agents.gcn.train.vec_env import CRITIC_INPUTS, ROW_LAYOUTS
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 from marl_vertiport.config import (
     ConfigError, build_dataclass, load_config, load_yaml_dataclass, to_dict,
@@ -175,7 +176,7 @@ class TrainConfig:
     predicted conflict and did not avoid it (the paper's S = -5, counted as a collision);
     evaluation reports the paper's reward. 0: none."""
     reward_scale: float = 1.0
-    """The learner's reward (after the lost-vehicle penalty) is multiplied by this; metrics and
+    """The learner's reward (after the penalties) is multiplied by this; metrics and
     evaluation keep the paper's reward."""
     critic_warmup_iterations: int = 0
     """First PPO iterations with the actor frozen, so that the critic fits the warm-started
@@ -197,8 +198,8 @@ class TrainConfig:
             (0 <= self.algorithm.gamma <= 1, "algorithm.gamma", "must lie in [0, 1]"),
             (self.algorithm.schedule in ("adaptive", "fixed", "linear"), "algorithm.schedule",
              "adaptive, fixed or linear"),
-            (self.rows in ("agents", "turns"), "rows", "agents or turns"),
-            (self.critic in ("state", "observation"), "critic", "state or observation"),
+            (self.rows in ROW_LAYOUTS, "rows", " or ".join(ROW_LAYOUTS)),
+            (self.critic in CRITIC_INPUTS, "critic", " or ".join(CRITIC_INPUTS)),
             (self.rows == "agents" or self.team_reward, "rows",
              "turns holds one stream of turns per copy: it needs team_reward: true"),
             (self.reward_scale > 0 and math.isfinite(self.reward_scale), "reward_scale",

@@ -73,6 +73,11 @@ from marl_vertiport.config import EnvConfig, load_config
 from marl_vertiport.sim.schema import EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, ActionLayout
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 
+#: The multi-agent row layouts and what its critic may read (the train config's ``rows`` and
+#: ``critic``).
+ROW_LAYOUTS = ("agents", "turns")
+CRITIC_INPUTS = ("state", "observation")
+
 #: Episode metrics logged by rsl_rl (averaged over the episodes that end in an iteration).
 LOGGED_METRICS = TRAINING_METRICS
 
@@ -140,8 +145,8 @@ class MultiAgentVecEnv(_VertiportVecEnv):
             ``"observation"`` (none: the critic reads the row's observation groups).
     """
 
-    ROWS = ("agents", "turns")
-    CRITICS = ("state", "observation")
+    ROWS = ROW_LAYOUTS
+    CRITICS = CRITIC_INPUTS
 
     def __init__(self, config: str | EnvConfig | list = "paper", num_envs: int = 8,
                  device: str = "cpu", seed: int = 0, team_reward: bool = True,
