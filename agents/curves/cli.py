@@ -69,9 +69,7 @@ def load_configs(names: Sequence[str], iterations: int | None) -> dict[str, dict
         if label in configs:
             raise ConfigError(f"train config {name!r} is given twice")
         cfg = to_dict(load_train_config(name))
-        if iterations is not None:
-            if iterations < 1:
-                raise ConfigError(f"--iterations must be >= 1, got {iterations}")
+        if iterations is not None:  # checked as the config's own key
             cfg["iterations"] = iterations
             build_dataclass(TrainConfig, cfg)
         configs[label] = cfg
