@@ -18,6 +18,7 @@ AGENT    ?= heuristic
 SWEEP    ?= wind
 CURVES   ?= scratch
 SEEDS    ?= 3
+ITERATIONS ?=
 # Where `evaluate`, `sweep` and `train` run their tasks: BACKEND=ray (Ray reads RAY_ADDRESS,
 # e.g. RAY_ADDRESS=auto to join a cluster started with `ray start --head`; docs/scaling.md).
 BACKEND  ?= local
@@ -60,8 +61,8 @@ TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>)
 	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(RUN_ON)
 
-curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), 95 % intervals over seeds, baselines as lines (runs/curves/)
-	$(CLI) curves --configs $(CURVES) --seeds $(SEEDS) $(RUN_ON)
+curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), ITERATIONS to override their budget, 95 % intervals over seeds, baselines as lines (runs/curves/)
+	$(CLI) curves --configs $(CURVES) --seeds $(SEEDS) $(if $(ITERATIONS),--iterations $(ITERATIONS)) $(RUN_ON)
 
 evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report
 ifdef SUITE

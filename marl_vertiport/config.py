@@ -415,7 +415,7 @@ def build_dataclass(cls: type, data: Any, where: str = "") -> Any:
 
 def load_yaml_dataclass(cls: type, spec: str | Path, folder: Path, kind: str) -> Any:
     """A ``cls`` schema from a YAML file: ``spec`` is a name in ``folder`` (without ``.yaml``)
-    or a path. A missing file (``kind`` names what was looked for, with the shipped names), bad
+    or a path; the file may extend another with ``base: <path relative to it>``. A missing file (``kind`` names what was looked for, with the shipped names), bad
     YAML or a schema error raises ``ConfigError`` naming the file."""
     path = Path(spec)
     if not path.suffix and not path.exists():
@@ -423,10 +423,7 @@ def load_yaml_dataclass(cls: type, spec: str | Path, folder: Path, kind: str) ->
     if not path.is_file():
         known = ", ".join(sorted(p.stem for p in folder.glob("*.yaml")))
         raise ConfigError(f"{kind} {str(spec)!r}: no such file (shipped: {known})")
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    data = _read_yaml(path, seen=())  # a ``base:`` key names a file it extends
     try:
         return build_dataclass(cls, data)
     except ConfigError as exc:

@@ -142,3 +142,29 @@ def test_conflict_penalty_is_charged_exactly_on_unresolved_conflicts(mode):
     assert charged_steps == sum(sim.metrics.collisions for sim in sims) >= 1
     plain.close()
     charged.close()
+
+
+def test_single_agent_copies_cycle_scenarios_with_the_same_spaces():
+    """The single agent trains across scenarios of one vertiport and fleet (copy k runs config
+    k mod len); configs whose spaces differ are refused, naming the one that differs."""
+    from agents.gcn.train.vec_env import SingleAgentVecEnv
+
+    env = SingleAgentVecEnv(["paper", "paper_uncertain"], num_envs=3, seed=2)
+    assert [copy.config.name for copy in env.venv.envs] == ["paper", "paper_uncertain", "paper"]
+    obs, rewards, dones, _ = env.step(_actions_of(env, np.random.default_rng(0)))
+    assert obs["action_mask"].shape[0] == rewards.shape[0] == dones.shape[0] == 3
+    env.close()
+    with pytest.raises(ValueError, match="'small' differs from 'paper'"):
+        SingleAgentVecEnv(["paper", "small"], num_envs=2)
+
+
+def test_critic_ablation_configs_differ_from_scratch_only_in_what_they_ablate():
+    """(b) and (c) of the centralised-critic study extend scratch.yaml (``base:``) and change
+    only the critic's input or the mode, so the three runs share every other setting."""
+    from agents.gcn.train.pipeline import load_train_config
+
+    scratch = to_dict(load_train_config("scratch"))
+    for name, changed in [("scratch_independent", {"critic": "observation"}),
+                          ("scratch_single", {"mode": "single_agent"})]:
+        cfg = to_dict(load_train_config(name))
+        assert {k: v for k, v in cfg.items() if cfg[k] != scratch[k]} == changed

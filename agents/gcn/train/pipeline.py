@@ -222,9 +222,6 @@ class TrainConfig:
              and all(0.0 < b <= 100.0 for b in self.pretrain.low_battery_pct),
              "pretrain.low_battery_pct", "a non-empty list of levels in (0, 100]"),
             (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
-            (not self.scenarios or self.mode == "multi_agent", "scenarios",
-             "training across scenarios needs mode multi_agent (the single-agent vector env "
-             "holds copies of one vertiport)"),
             (self.lost_vehicle_penalty >= 0, "lost_vehicle_penalty", "must be >= 0"),
             (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),
         ]
@@ -275,7 +272,7 @@ def make_vec_env(cfg: TrainConfig):
                                 lost_vehicle_penalty=cfg.lost_vehicle_penalty, rows=cfg.rows,
                                 critic=cfg.critic, reward_scale=cfg.reward_scale,
                                 conflict_penalty=cfg.conflict_penalty)
-    return SingleAgentVecEnv(cfg.env_config, num_envs=cfg.num_envs, device=cfg.device, seed=cfg.seed,
+    return SingleAgentVecEnv(scenario_configs(cfg), num_envs=cfg.num_envs, device=cfg.device, seed=cfg.seed,
                              lost_vehicle_penalty=cfg.lost_vehicle_penalty,
                              reward_scale=cfg.reward_scale, conflict_penalty=cfg.conflict_penalty)
 

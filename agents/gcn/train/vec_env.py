@@ -49,7 +49,8 @@ paper's reward.
 
 **Single agent** (:class:`SingleAgentVecEnv`, fully centralised): the Gymnasium env vectorised
 with supersuit (``gym_vec_env_v0``; with ``multiprocessing=True`` each copy runs in its own
-worker process), one row per copy, ``R = K``; actor and critic both see the acting
+worker process), one row per copy, ``R = K``; scenarios with the same spaces (``paper`` and
+``paper_uncertain``) are cycled over the copies with Gymnasium's vector envs; actor and critic both see the acting
 eVTOL's (centralised) observation. Gymnasium's vector envs reset a finished copy on the step
 after its truncation, so one transition in 1440 per copy carries no reward.
 
@@ -295,22 +296,51 @@ class MultiAgentVecEnv(_VertiportVecEnv):
 
 
 class SingleAgentVecEnv(_VertiportVecEnv):
-    """One row per env copy, vectorised with supersuit; see the module docstring."""
+    """One row per env copy, vectorised with supersuit; see the module docstring.
 
-    def __init__(self, config: str | EnvConfig = "paper", num_envs: int = 8, device: str = "cpu",
-                 seed: int = 0, multiprocessing: bool = False, lost_vehicle_penalty: float = 0.0,
-                 reward_scale: float = 1.0, conflict_penalty: float = 0.0) -> None:
+    Args:
+        config: the env config, or a list of them (scenarios, cycled over the copies: copy
+            ``k`` runs config ``k mod len(configs)``). The single agent's observation and
+            action spaces have no padding, so every config of a list must have the same
+            spaces (the same vertiport and fleet, as ``paper`` and ``paper_uncertain``).
+    """
+
+    def __init__(self, config: str | EnvConfig | list = "paper", num_envs: int = 8,
+                 device: str = "cpu", seed: int = 0, multiprocessing: bool = False,
+                 lost_vehicle_penalty: float = 0.0, reward_scale: float = 1.0,
+                 conflict_penalty: float = 0.0) -> None:
+        import gymnasium
         import supersuit as ss
 
         from marl_vertiport.gym_env import VertiportEnv
 
-        cfg = load_config(config)
-        super().__init__(cfg, num_envs, 1, device, seed, lost_vehicle_penalty, reward_scale,
+        configs = [load_config(c) for c in (config if isinstance(config, (list, tuple)) else [config])]
+        if not configs:
+            raise ValueError("SingleAgentVecEnv needs at least one env config")
+        super().__init__(configs[0], num_envs, 1, device, seed, lost_vehicle_penalty, reward_scale,
                          conflict_penalty)
+        self.scenarios = configs
+        self.cfg["env_config"] = [c.name for c in configs]
         # multiprocessing: one worker process per copy (gymnasium's AsyncVectorEnv with shared
         # memory; supersuit's concat_vec_envs cannot concatenate nested Dict observations).
-        self.venv = ss.gym_vec_env_v0(VertiportEnv(config=cfg), self.num_copies,
-                                      multiprocessing=multiprocessing)
+        if len(configs) == 1:
+            self.venv = ss.gym_vec_env_v0(VertiportEnv(config=configs[0]), self.num_copies,
+                                          multiprocessing=multiprocessing)
+        else:
+            envs = [VertiportEnv(config=c) for c in configs]
+            for env, c in zip(envs[1:], configs[1:]):
+                if (env.observation_space != envs[0].observation_space
+                        or env.action_space != envs[0].action_space):
+                    raise ValueError(
+                        f"single-agent scenarios must share their observation and action spaces "
+                        f"(the same vertiport and fleet): {c.name!r} differs from "
+                        f"{configs[0].name!r}; train across layouts with mode multi_agent")
+            for env in envs:
+                env.close()
+            fns = [lambda c=configs[k % len(configs)]: VertiportEnv(config=c)
+                   for k in range(self.num_copies)]
+            vector = gymnasium.vector.AsyncVectorEnv if multiprocessing else gymnasium.vector.SyncVectorEnv
+            self.venv = vector(fns)
         obs, _ = self.venv.reset(seed=self._next_seed())
         self._obs = self._convert(obs)
 
