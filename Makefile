@@ -35,10 +35,11 @@ $(PY):
 	$(PIP) install --quiet --upgrade pip
 
 # torch first, pinned to the CPU build, so nothing later pulls a CUDA build. The ray extra
-# (the ray backend) is installed too, so that `make test` runs its tests.
+# (the ray backend) and the torchrl and rllib extras (agents/interop/) are installed too, so that
+# `make test` runs their tests.
 $(STAMP): $(PY) pyproject.toml
 	$(PIP) install --quiet torch==2.13.0
-	$(PIP) install --quiet -e '.[test,ray]'
+	$(PIP) install --quiet -e '.[test,ray,torchrl,rllib]'
 	@touch $(STAMP)
 
 venv: $(STAMP)  ## create .venv and install the project with pinned dependencies
