@@ -36,6 +36,7 @@ from typing import Any
 
 from agents.interop import require
 from agents.interop.flat import FlatObservation
+from agents.interop.nets import mlp, symlog
 from marl_vertiport import vertiport_v0
 
 __all__ = ["ENV_NAME", "MODULE_ID", "MaskedActorCritic", "env_creator", "make_env",
@@ -55,7 +56,6 @@ from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec  # noqa: 
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec  # noqa: E402
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule  # noqa: E402
 from ray.rllib.env.wrappers.pettingzoo_env import PettingZooEnv  # noqa: E402
-from torch import nn  # noqa: E402
 
 
 def make_env(config: Any = "paper", *, with_state: bool = True, **overrides: Any) -> PettingZooEnv:
@@ -81,15 +81,6 @@ def register(name: str = ENV_NAME) -> str:
     return name
 
 
-def _symlog(x: torch.Tensor) -> torch.Tensor:
-    return torch.sign(x) * torch.log1p(x.abs())
-
-
-def _mlp(n_in: int, n_out: int, hidden: int) -> nn.Sequential:
-    return nn.Sequential(nn.Linear(n_in, hidden), nn.Tanh(), nn.Linear(hidden, hidden),
-                         nn.Tanh(), nn.Linear(hidden, n_out))
-
-
 class MaskedActorCritic(TorchRLModule, ValueFunctionAPI):
     """An MLP actor over ``"observations"`` whose illegal actions (``"action_mask"`` 0) get
     the most negative finite logit, so probability 0; an MLP critic over ``"state"`` when the
@@ -102,19 +93,19 @@ class MaskedActorCritic(TorchRLModule, ValueFunctionAPI):
         config = self.model_config if isinstance(self.model_config, dict) else {}
         hidden = int(config.get("hidden", 64))
         self.critic_key = "state" if "state" in space.spaces else "observations"
-        self.pi = _mlp(space["observations"].shape[0], self.action_space.n, hidden)
+        self.pi = mlp(space["observations"].shape[0], self.action_space.n, hidden)
         if not self.inference_only:
-            self.vf = _mlp(space[self.critic_key].shape[0], 1, hidden)
+            self.vf = mlp(space[self.critic_key].shape[0], 1, hidden)
 
     def _forward(self, batch: dict, **kwargs) -> dict:
         obs = batch[Columns.OBS]
-        logits = self.pi(_symlog(obs["observations"].float()))
+        logits = self.pi(symlog(obs["observations"].float()))
         illegal = obs["action_mask"] == 0
         logits = logits.masked_fill(illegal, torch.finfo(logits.dtype).min)
         return {Columns.ACTION_DIST_INPUTS: logits}
 
     def compute_values(self, batch: dict, embeddings: Any = None) -> torch.Tensor:
-        return self.vf(_symlog(batch[Columns.OBS][self.critic_key].float())).squeeze(-1)
+        return self.vf(symlog(batch[Columns.OBS][self.critic_key].float())).squeeze(-1)
 
 
 def ppo_config(env_config: dict | None = None, *, hidden: int = 64, seed: int = 0,

@@ -36,6 +36,7 @@ import torch
 from torch import nn
 
 from agents.interop import require
+from agents.interop.nets import mlp, symlog
 from marl_vertiport import vertiport_v0
 
 __all__ = ["ACTING", "ACTION", "ACTION_MASK", "GROUP", "LOG_PROB", "OBSERVATION", "VALUE",
@@ -70,11 +71,6 @@ def make_env(config: Any = "paper", *, seed: int | None = None, return_state: bo
                                  group_map={GROUP: list(aec.possible_agents)})
 
 
-def symlog(x: torch.Tensor) -> torch.Tensor:
-    """sign(x) log(1 + |x|): metres, minutes and percents on one scale without statistics."""
-    return torch.sign(x) * torch.log1p(x.abs())
-
-
 class _Flatten(nn.Module):
     """The inputs' last ``event_dims[i]`` dimensions raveled and joined, then symlog."""
 
@@ -85,11 +81,6 @@ class _Flatten(nn.Module):
     def forward(self, *xs: torch.Tensor) -> torch.Tensor:
         return symlog(torch.cat([x.flatten(x.ndim - d) if d > 1 else x
                                  for x, d in zip(xs, self.event_dims)], dim=-1))
-
-
-def _mlp(n_in: int, n_out: int, hidden: int) -> nn.Sequential:
-    return nn.Sequential(nn.Linear(n_in, hidden), nn.Tanh(), nn.Linear(hidden, hidden),
-                         nn.Tanh(), nn.Linear(hidden, n_out))
 
 
 def _group_keys(spec, prefix: tuple, batch_dims: int) -> tuple[list, tuple[int, ...], int]:
@@ -108,7 +99,7 @@ def _group_keys(spec, prefix: tuple, batch_dims: int) -> tuple[list, tuple[int, 
 class _ActorNet(nn.Module):
     def __init__(self, event_dims: tuple[int, ...], n_in: int, n_actions: int, hidden: int):
         super().__init__()
-        self.flat, self.mlp = _Flatten(event_dims), _mlp(n_in, n_actions, hidden)
+        self.flat, self.mlp = _Flatten(event_dims), mlp(n_in, n_actions, hidden)
 
     def forward(self, *xs: torch.Tensor) -> torch.Tensor:
         return self.mlp(self.flat(*xs))
@@ -139,7 +130,7 @@ class _CentralCritic(nn.Module):
     def __init__(self, event_dims: tuple[int, ...], n_in: int, n_agents: int, hidden: int):
         super().__init__()
         self.n_agents = n_agents
-        self.flat, self.mlp = _Flatten(event_dims), _mlp(n_in + n_agents, 1, hidden)
+        self.flat, self.mlp = _Flatten(event_dims), mlp(n_in + n_agents, 1, hidden)
 
     def forward(self, *xs: torch.Tensor) -> torch.Tensor:
         state = self.flat(*xs)                                       # (..., S)
