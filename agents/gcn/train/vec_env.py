@@ -83,6 +83,14 @@ CRITIC_INPUTS = ("state", "observation")
 LOGGED_METRICS = TRAINING_METRICS
 
 
+def _load_configs(config: str | EnvConfig | list, owner: str) -> list[EnvConfig]:
+    """An env config, or a list of them (scenarios), loaded; an empty list is refused."""
+    configs = [load_config(c) for c in (config if isinstance(config, (list, tuple)) else [config])]
+    if not configs:
+        raise ValueError(f"{owner} needs at least one env config")
+    return configs
+
+
 class _VertiportVecEnv(VecEnv):
     """What both adapters share: config, row bookkeeping, action conversion, episode extras."""
 
@@ -163,9 +171,7 @@ class MultiAgentVecEnv(_VertiportVecEnv):
         if rows == "turns" and not team_reward:
             raise ValueError("rows='turns' holds one stream of turns per copy, which has only "
                              "the team reward: team_reward=False needs rows='agents'")
-        configs = [load_config(c) for c in (config if isinstance(config, (list, tuple)) else [config])]
-        if not configs:
-            raise ValueError("MultiAgentVecEnv needs at least one env config")
+        configs = _load_configs(config, "MultiAgentVecEnv")
         max_n = max(c.fleet_size for c in configs)
         self.turn_rows = rows == "turns"
         self.with_state = critic == "state"
@@ -314,9 +320,7 @@ class SingleAgentVecEnv(_VertiportVecEnv):
 
         from marl_vertiport.gym_env import VertiportEnv
 
-        configs = [load_config(c) for c in (config if isinstance(config, (list, tuple)) else [config])]
-        if not configs:
-            raise ValueError("SingleAgentVecEnv needs at least one env config")
+        configs = _load_configs(config, "SingleAgentVecEnv")
         super().__init__(configs[0], num_envs, 1, device, seed, lost_vehicle_penalty, reward_scale,
                          conflict_penalty)
         self.scenarios = configs
