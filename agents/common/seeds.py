@@ -31,6 +31,14 @@ def evaluation_seeds(episodes: int, first_seed: int | None = None) -> tuple[int,
     return tuple(EVAL_SEEDS[:episodes])
 
 
+def seeds_rule(episodes: int, first_seed: int | None = None, range_name: str = "seeds") -> str:
+    """How :func:`evaluation_seeds` chose the days, in words for reports and result files:
+    ``"<range_name> START:STOP"`` for a seed range, else ``"EVAL_SEEDS[:N] (...)"``."""
+    if first_seed is not None:
+        return f"{range_name} {first_seed}:{first_seed + episodes}"
+    return f"EVAL_SEEDS[:{episodes}] (agents.common.seeds)"
+
+
 def parse_seed_range(text: str) -> range:
     """``"START:STOP"`` (stop excluded) as a range of evaluation seeds; a range that reaches
     into the training seeds, or an empty or malformed one, raises ``ValueError``."""

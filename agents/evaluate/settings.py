@@ -9,7 +9,7 @@ from typing import Any, Iterable
 
 import yaml
 
-from agents.common.seeds import evaluation_seeds
+from agents.common.seeds import evaluation_seeds, seeds_rule
 from agents.execution.base import INTERRUPTED  # noqa: F401 (the error of a run stopped with Ctrl-C)
 
 DEFAULT_AGENTS = ("random", "fcfs", "heuristic")
@@ -86,9 +86,7 @@ class EvalSettings:
     @property
     def seeds_rule(self) -> str:
         """How the seeds were chosen, in words for the report and results.json."""
-        if self.first_seed is not None:
-            return f"--seeds {self.first_seed}:{self.first_seed + self.episodes}"
-        return f"EVAL_SEEDS[:{self.episodes}] (agents.common.seeds)"
+        return seeds_rule(self.episodes, self.first_seed, "--seeds")
 
     def tasks(self) -> list[EpisodeTask]:
         """Every episode to run, in (agent, case, episode) order."""

@@ -25,7 +25,7 @@ from typing import Any
 
 import yaml
 
-from agents.common.seeds import EVAL_SEEDS, evaluation_seeds, parse_seed_range
+from agents.common.seeds import EVAL_SEEDS, evaluation_seeds, parse_seed_range, seeds_rule
 from agents.evaluate.settings import EpisodeTask, InputError, Overrides
 
 SWEEP_DIR = Path(__file__).resolve().parents[2] / "configs" / "sweeps"
@@ -61,9 +61,7 @@ class SweepSpec:
 
     @property
     def seeds_rule(self) -> str:
-        if self.first_seed is not None:
-            return f"seeds {self.first_seed}:{self.first_seed + self.episodes}"
-        return f"EVAL_SEEDS[:{self.episodes}] (agents.common.seeds)"
+        return seeds_rule(self.episodes, self.first_seed)
 
     def points(self) -> list[Overrides]:
         """Every combination of the grid's values, the first key varying slowest."""
