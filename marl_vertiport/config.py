@@ -413,16 +413,23 @@ def build_dataclass(cls: type, data: Any, where: str = "") -> Any:
     return _build(cls, data, where)
 
 
-def load_yaml_dataclass(cls: type, spec: str | Path, folder: Path, kind: str) -> Any:
-    """A ``cls`` schema from a YAML file: ``spec`` is a name in ``folder`` (without ``.yaml``)
-    or a path; the file may extend another with ``base: <path relative to it>``. A missing file (``kind`` names what was looked for, with the shipped names), bad
-    YAML or a schema error raises ``ConfigError`` naming the file."""
+def find_yaml(spec: str | Path, folder: Path, kind: str) -> Path:
+    """The file ``spec`` names: a name in ``folder`` (without ``.yaml``) or a path. A missing
+    one raises ``ConfigError`` naming ``kind`` and the shipped names."""
     path = Path(spec)
     if not path.suffix and not path.exists():
         path = folder / f"{spec}.yaml"
     if not path.is_file():
         known = ", ".join(sorted(p.stem for p in folder.glob("*.yaml")))
         raise ConfigError(f"{kind} {str(spec)!r}: no such file (shipped: {known})")
+    return path
+
+
+def load_yaml_dataclass(cls: type, spec: str | Path, folder: Path, kind: str) -> Any:
+    """A ``cls`` schema from a YAML file: ``spec`` is a name in ``folder`` (without ``.yaml``)
+    or a path; the file may extend another with ``base: <path relative to it>``. A missing file (``kind`` names what was looked for, with the shipped names), bad
+    YAML or a schema error raises ``ConfigError`` naming the file."""
+    path = find_yaml(spec, folder, kind)
     data = _read_yaml(path, seen=())  # a ``base:`` key names a file it extends
     try:
         return build_dataclass(cls, data)

@@ -27,6 +27,7 @@ import yaml
 
 from agents.common.seeds import EVAL_SEEDS, evaluation_seeds, parse_seed_range, seeds_rule
 from agents.evaluate.settings import EpisodeTask, InputError, Overrides
+from marl_vertiport.config import ConfigError, find_yaml
 
 SWEEP_DIR = Path(__file__).resolve().parents[2] / "configs" / "sweeps"
 #: The figure's panels unless the file names others: reward and safety side by side.
@@ -168,12 +169,10 @@ def load_sweep(spec: str | Path, changes: dict[str, Any] | None = None) -> Sweep
     """A sweep by name (``configs/sweeps/``) or YAML path, with ``changes`` from the command
     line applied first: top-level keys replace the file's, except ``grid`` and ``set``, whose
     entries are added to (or replace) the file's."""
-    path = Path(spec)
-    if not path.suffix and not path.exists():
-        path = SWEEP_DIR / f"{spec}.yaml"
-    if not path.is_file():
-        known = ", ".join(sorted(p.stem for p in SWEEP_DIR.glob("*.yaml")))
-        raise InputError(f"sweep {str(spec)!r}: no such file (shipped: {known})")
+    try:
+        path = find_yaml(spec, SWEEP_DIR, "sweep")
+    except ConfigError as exc:
+        raise InputError(str(exc)) from None
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as exc:
