@@ -22,7 +22,7 @@ from agents.gcn.train.pipeline import (
 )
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
 from agents.gcn.train.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
-from marl_vertiport.config import build_dataclass, load_config, to_dict
+from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 
 torch.set_num_threads(1)
 
@@ -82,6 +82,26 @@ def test_actor_and_critic_shapes_on_batched_graphs():
     assert actor.output_entropy.shape == (12,)
     assert actor.action_probabilities(obs).shape == (12, 14)
     assert critic(obs).shape == (12, 1)
+
+
+def test_sharpening_divides_every_logit_and_keeps_the_greedy_actions():
+    torch.manual_seed(2)
+    obs = example_obs(3)
+    actor = GraphActor(obs, {"actor": list(POLICY_GROUPS)}, "actor", 1, feature_names("observation"))
+    actor.eval()
+    with torch.no_grad():
+        before, greedy = actor.logits(obs), actor(obs)
+        actor.action_probabilities(obs)
+        entropy = actor.distribution.entropy.clone()
+        actor.sharpen(0.25)
+        torch.testing.assert_close(actor.logits(obs), before / 0.25)
+        assert torch.equal(actor(obs), greedy)
+        actor.action_probabilities(obs)
+        assert (actor.distribution.entropy <= entropy + 1e-6).all()
+        assert (actor.distribution.entropy < entropy).any()
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="temperature"):
+            actor.sharpen(bad)
 
 
 def test_gcn_output_is_invariant_to_the_order_of_the_fleet():
@@ -407,6 +427,45 @@ def test_log_writer_passes_each_iteration_to_the_runs_listener(tmp_path):
         unregister_listener(tmp_path)
     assert calls == [("updated", 0, ["Loss/value", "Perf/learning_time"]), ("done", 0, None),
                      ("updated", 1, ["Loss/value", "Perf/learning_time"]), ("done", 1, 12.5)]
+
+
+def test_ppo_starts_from_the_warm_start_sharpened_by_the_temperature(tmp_path, monkeypatch):
+    """``warm_start_temperature``: model_warmstart.pt keeps the imitation actor; PPO's first
+    iteration (actor frozen) holds it with the two output layers divided by the temperature
+    and every other weight unchanged."""
+    import agents.gcn.train.pipeline as pipeline
+
+    def fake_warm_start(actor, *args, **kwargs):
+        with torch.no_grad():
+            for p in actor.parameters():
+                p.normal_()
+        return {"chosen_fit": 0}
+
+    monkeypatch.setattr(pipeline, "warm_start", fake_warm_start)
+    cfg = tiny_config("multi_agent", iterations=1, critic_warmup_iterations=1,
+                      warm_start_temperature=0.5)
+    lines = []
+    train(cfg, tmp_path, log=lines.append, evaluate=False)
+    assert any("sharpened" in line for line in lines)
+    warm = torch.load(tmp_path / "model_warmstart.pt", weights_only=True)["actor_state_dict"]
+    first = torch.load(tmp_path / "model_0.pt", weights_only=True)["actor_state_dict"]
+    outputs = {f"mlp.{_last_index(warm, 'mlp.')}",
+               f"node_scorer.{_last_index(warm, 'node_scorer.')}"}
+    scaled = 0
+    for key, value in warm.items():
+        if key.rsplit(".", 1)[0] in outputs:
+            torch.testing.assert_close(first[key], value / 0.5)
+            scaled += 1
+        else:
+            assert torch.equal(first[key], value), key
+    assert scaled == 4  # two weights and two biases
+    with pytest.raises(ConfigError, match="warm_start_temperature"):
+        tiny_config("multi_agent", warm_start_temperature=0.0)
+
+
+def _last_index(state: dict, prefix: str) -> int:
+    """The largest layer index under ``prefix`` in a state dict (``mlp.4.weight`` -> 4)."""
+    return max(int(k[len(prefix):].split(".")[0]) for k in state if k.startswith(prefix))
 
 
 def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):

@@ -34,6 +34,8 @@ Shapes: the latent is ``(B, 4 * hidden)``; the actor outputs ``(B, 1)`` actions,
 
 from __future__ import annotations
 
+import math
+
 import torch
 from rsl_rl.models import MLPModel
 from tensordict import TensorDict
@@ -225,6 +227,14 @@ class _GraphModel(MLPModel):
         return self.encode(obs)[0]
 
 
+def _last_linear(seq: nn.Sequential) -> nn.Linear:
+    """The output layer of an MLP built as a ``Sequential`` ending in a linear layer."""
+    last = seq[-1]
+    if not isinstance(last, nn.Linear):
+        raise TypeError(f"the MLP ends in {type(last).__name__}, not a linear layer")
+    return last
+
+
 class GraphActor(_GraphModel):
     """Shared GCN actor: legal-action-masked logits ``(B, 4 + P)`` -> :class:`MaskedCategorical`.
 
@@ -275,6 +285,17 @@ class GraphActor(_GraphModel):
         pair = torch.cat([port_nodes, port_x, own_emb.unsqueeze(1).expand(-1, p, -1), rel, dist], dim=-1)
         nodes = self.node_scorer(pair).squeeze(-1)  # (B, P)
         return torch.cat([fixed[:, :LEADING_ACTIONS], nodes, fixed[:, LEADING_ACTIONS:]], dim=-1)
+
+    @torch.no_grad()
+    def sharpen(self, temperature: float) -> None:
+        """Divide every logit by ``temperature`` for good, by scaling the weights and biases of
+        the two output layers (the head's and the node scorer's, both linear), so the argmax,
+        the greedy action, is unchanged; below 1 the policy samples closer to it."""
+        if not (temperature > 0 and math.isfinite(temperature)):
+            raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
+        for layer in (_last_linear(self.mlp), _last_linear(self.node_scorer)):
+            layer.weight.div_(temperature)
+            layer.bias.div_(temperature)
 
     def action_probabilities(self, obs: TensorDict) -> torch.Tensor:
         """``(B, A)`` probabilities, 0 on illegal actions."""

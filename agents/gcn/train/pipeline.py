@@ -181,6 +181,11 @@ class TrainConfig:
     critic_warmup_iterations: int = 0
     """First PPO iterations with the actor frozen, so that the critic fits the warm-started
     policy before its advantages move the actor."""
+    warm_start_temperature: float = 1.0
+    """Before PPO, the warm-started actor's logits are divided by this for good (its output
+    layers scaled, see :meth:`GraphActor.sharpen`): below 1 the policy PPO samples, and so
+    improves, comes closer to the greedy policy that is deployed. The greedy actions stay
+    those of the warm start. 1: as imitated."""
     pretrain: PretrainConfig = field(default_factory=PretrainConfig)
     algorithm: AlgorithmConfig = field(default_factory=AlgorithmConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
@@ -205,6 +210,8 @@ class TrainConfig:
             (self.reward_scale > 0 and math.isfinite(self.reward_scale), "reward_scale",
              "must be a finite number > 0"),
             (self.conflict_penalty >= 0, "conflict_penalty", "must be >= 0"),
+            (self.warm_start_temperature > 0 and math.isfinite(self.warm_start_temperature),
+             "warm_start_temperature", "must be a finite number > 0"),
             (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
              "pretrain", "days, epochs and dagger_rounds must be >= 0"),
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
@@ -494,6 +501,10 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
                            state_path=state_path, on_round=on_round, backend=backend)
         if stats:
             runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
+            if cfg.warm_start_temperature != 1.0:
+                runner.alg.actor.sharpen(cfg.warm_start_temperature)
+                log(f"warm start sharpened: logits / {cfg.warm_start_temperature:g} "
+                    "(the same greedy actions)")
     remaining = cfg.iterations - runner.current_learning_iteration
     samples_per_it = cfg.num_envs * cfg.num_steps_per_env
     t0 = time.time()
