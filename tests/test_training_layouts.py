@@ -168,3 +168,19 @@ def test_critic_ablation_configs_differ_from_scratch_only_in_what_they_ablate():
                           ("scratch_single", {"mode": "single_agent"})]:
         cfg = to_dict(load_train_config(name))
         assert {k: v for k, v in cfg.items() if cfg[k] != scratch[k]} == changed
+
+
+def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm_start():
+    """Every YAML file under configs/train/ (subfolders too) is a valid train config, and
+    ppo_stage/sharpened.yaml keeps the default's warm start (its PPO stage alone differs)."""
+    from agents.gcn.train.pipeline import TRAIN_CONFIG_DIR, load_train_config
+
+    files = sorted(TRAIN_CONFIG_DIR.rglob("*.yaml"))
+    assert len(files) >= 8
+    for path in files:
+        load_train_config(path)
+    default = to_dict(load_train_config("default"))
+    stage = to_dict(load_train_config("ppo_stage/sharpened"))
+    for key in ("pretrain", "model", "scenarios", "seed", "lost_vehicle_penalty", "mode"):
+        assert stage[key] == default[key], key
+    assert stage["warm_start_temperature"] == 0.3 and default["warm_start_temperature"] == 1.0
