@@ -420,7 +420,8 @@ def find_yaml(spec: str | Path, folder: Path, kind: str) -> Path:
     if not path.suffix and not path.exists():
         path = folder / f"{spec}.yaml"
     if not path.is_file():
-        known = ", ".join(sorted(p.stem for p in folder.glob("*.yaml")))
+        known = ", ".join(sorted(p.relative_to(folder).with_suffix("").as_posix()
+                                 for p in folder.rglob("*.yaml")))
         raise ConfigError(f"{kind} {str(spec)!r}: no such file (shipped: {known})")
     return path
 

@@ -72,6 +72,13 @@ def test_unknown_config_name_lists_shipped_ones():
         load_config("no_such_config")
 
 
+def test_unknown_train_config_lists_the_ones_in_subfolders():
+    from agents.gcn.train.pipeline import load_train_config
+
+    with pytest.raises(ConfigError, match="ppo_stage/sharpened"):
+        load_train_config("no_such_config")
+
+
 def test_overrides_dotted_and_sections():
     cfg = load_config("paper", **{"uncertainty.wind_gust_prob": 0.2}, fleet_size=3)
     assert cfg.uncertainty.wind_gust_prob == 0.2 and cfg.fleet_size == 3

@@ -443,7 +443,8 @@ def test_ppo_starts_from_the_warm_start_sharpened_by_the_temperature(tmp_path, m
 
     monkeypatch.setattr(pipeline, "warm_start", fake_warm_start)
     cfg = tiny_config("multi_agent", iterations=1, critic_warmup_iterations=1,
-                      warm_start_temperature=0.5)
+                      warm_start_temperature=0.5,
+                      pretrain={"days": 1, "epochs": 1, "batch_size": 64, "learning_rate": 1e-3})
     lines = []
     train(cfg, tmp_path, log=lines.append, evaluate=False)
     assert any("sharpened" in line for line in lines)
@@ -461,6 +462,9 @@ def test_ppo_starts_from_the_warm_start_sharpened_by_the_temperature(tmp_path, m
     assert scaled == 4  # two weights and two biases
     with pytest.raises(ConfigError, match="warm_start_temperature"):
         tiny_config("multi_agent", warm_start_temperature=0.0)
+    # With no warm start there is nothing to sharpen: refused, not ignored.
+    with pytest.raises(ConfigError, match="warm_start_temperature: sharpens the warm start"):
+        tiny_config("multi_agent", warm_start_temperature=0.5)
 
 
 def _last_index(state: dict, prefix: str) -> int:

@@ -212,6 +212,9 @@ class TrainConfig:
             (self.conflict_penalty >= 0, "conflict_penalty", "must be >= 0"),
             (self.warm_start_temperature > 0 and math.isfinite(self.warm_start_temperature),
              "warm_start_temperature", "must be a finite number > 0"),
+            (self.warm_start_temperature == 1.0
+             or (self.pretrain.days > 0 and self.pretrain.epochs > 0), "warm_start_temperature",
+             "sharpens the warm start: it needs pretrain.days and pretrain.epochs > 0"),
             (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
              "pretrain", "days, epochs and dagger_rounds must be >= 0"),
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
