@@ -78,3 +78,12 @@ def test_iqm_drops_the_lowest_and_highest_quarter():
     assert iqm(np.array([1.0, 2.0, 9.0])) == pytest.approx(4.0)  # fewer than 4: the mean
     low, high = iqm_ci([1.0, 2.0, 3.0, 4.0, 5.0], resamples=200)
     assert 1.0 <= low <= 3.0 <= high <= 5.0
+
+
+def test_baseline_lines_say_which_days_scored_them():
+    from agents.curves.outputs import baseline_label
+
+    base = {"agent": "fcfs", "scenarios": "paper, wide"}
+    assert baseline_label(base, (900000, 900010)).endswith(
+        "(paper, wide, validation days 900000-900009)")
+    assert "validation" not in baseline_label(base, None)

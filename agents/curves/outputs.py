@@ -143,6 +143,13 @@ def final_rows(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return list(last.values())
 
 
+def baseline_label(base: dict[str, Any], days: tuple[int, int] | None) -> str:
+    """Legend entry of a baseline's line: the agent, its scenarios and, where known, the
+    validation days (seeds ``days[0]`` to ``days[1] - 1``) it was scored on."""
+    where = f", validation days {days[0]}-{days[1] - 1}" if days else ""
+    return f"{agent_label(base['agent'])} ({base['scenarios']}{where})"
+
+
 def curves_figure(result: CurvesResult, summary: list[dict[str, Any]]) -> bytes:
     plt = pyplot()
     fig, axes = plt.subplots(1, len(CURVE_METRICS), figsize=(6.0 * len(CURVE_METRICS), 4.6))
@@ -161,10 +168,10 @@ def curves_figure(result: CurvesResult, summary: list[dict[str, Any]]) -> bytes:
             ax.fill_between(x, [r["ci_low"] for r in rows], [r["ci_high"] for r in rows],
                             color=color, alpha=0.2)
             ax.plot(x, [r["iqm"] for r in rows], color=color, linestyle="--", linewidth=1,
-                    label=f"{label}: IQM")
+                    label=f"{label}: IQM" + (" (the mean: < 4 seeds)" if seeds < 4 else ""))
         for k, base in enumerate(b for b in result.baselines if b["metric"] == metric):
             ax.axhline(base["mean"], color=grays[k % len(grays)], linestyle=styles[k % len(styles)],
-                       linewidth=1.3, label=f"{agent_label(base['agent'])} ({base['scenarios']})")
+                       linewidth=1.3, label=baseline_label(base, result.baseline_seeds))
         ax.set_title(title)
         ax.set_xlabel("environment steps (millions)")
         ax.grid(alpha=0.3)
