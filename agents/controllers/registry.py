@@ -1,7 +1,8 @@
 """Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``,
 ``rollout`` (the look-ahead planner, which reads the simulator), ``gcn``
-(the shipped trained policy), ``package.module:Class`` (a class, or a ready object), or the path
-of a training checkpoint (``.pt``).
+(the shipped trained policy), ``package.module:Class`` (a class, or a ready object), the path
+of a training checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
+:class:`agents.gcn.policy.GCNEnsemble`).
 
 A built-in name or an import path may carry constructor arguments in brackets, values read as
 YAML: ``heuristic[holding=false]``, ``rollout[horizon=80,nominal=false]``,
@@ -36,7 +37,8 @@ def agent_help() -> str:
     """What an agent spec may be, for the ``--help`` of every command that takes one."""
     names = ", ".join([*BUILTIN, "gcn"])
     return (f"a built-in name ({names}; gcn is the shipped checkpoint), the path of a training "
-            "checkpoint (.pt) or an import path 'package.module:Class'; constructor arguments "
+            "checkpoint (.pt), checkpoints joined by '+' (their ensemble) or an import path "
+            "'package.module:Class'; constructor arguments "
             "in brackets, e.g. 'heuristic[holding=false]'")
 
 
@@ -96,6 +98,14 @@ def make_controller(spec: str) -> Any:
     Raises:
         AgentSpecError: unknown name, import failure, or an object without ``act``.
     """
+    if "+" in spec and all(p.endswith(".pt") or p == "gcn" for p in spec.split("+")):
+        from agents.gcn.policy import CheckpointError, GCNEnsemble
+
+        try:  # checkpoints joined by "+": their ensemble
+            return GCNEnsemble([SHIPPED_CHECKPOINT if p == "gcn" else Path(p)
+                                for p in spec.split("+")])
+        except CheckpointError as exc:
+            raise AgentSpecError(f"agent {spec!r}: {exc}") from exc
     target_spec, kwargs = split_spec(spec)
     if target_spec == "gcn" or target_spec.endswith(".pt"):
         from agents.gcn.policy import CheckpointError, GCNController

@@ -125,6 +125,16 @@ class GCNController(Controller):
             self.generator.manual_seed(seed)
 
     def act(self, observation: dict) -> int:
+        obs = self.checked_tensors(observation)
+        with torch.no_grad():
+            if self.deterministic:
+                return int(self.actor(obs).item())
+            probs = self.actor.action_probabilities(obs)
+            return int(torch.multinomial(probs, 1, generator=self.generator).item())
+
+    def checked_tensors(self, observation: dict) -> TensorDict:
+        """One AEC observation as the actor's batch of one, after checking that its feature
+        columns and action mask are those this checkpoint reads (else ``CheckpointError``)."""
         obs = self._tensors(observation)
         for key, count in self.feature_counts.items():
             if obs[key].shape[-1] != count:
@@ -135,8 +145,39 @@ class GCNController(Controller):
         if obs["action_mask"].shape[-1] != ActionLayout(n_nodes).n:
             raise CheckpointError(f"action mask of width {obs['action_mask'].shape[-1]} for "
                                   f"{n_nodes} vertiport nodes: expected {ActionLayout(n_nodes).n}")
+        return obs
+
+
+class GCNEnsemble(Controller):
+    """Several trained GCN actors as one controller: the legal action with the largest mean
+    log-probability over the members (their geometric-mean policy), greedily.
+
+    Fits of the same demonstrations with different seeds play quite differently
+    (``python -m agents.studies.refit``); their ensemble averages that luck out. In an agent
+    spec, checkpoints joined by ``+`` name an ensemble: ``run/model_warmstart.pt+refit/model_refit1.pt``.
+
+    Args:
+        paths: two or more checkpoints (paths, or checkpoint contents), each checked as by
+            :class:`GCNController`.
+    """
+
+    pure_act = True
+
+    def __init__(self, paths: list[str | Path | dict[str, Any]]) -> None:
+        if len(paths) < 2:
+            raise CheckpointError(f"an ensemble needs two or more checkpoints, got {len(paths)}")
+        self.members = [GCNController(p) for p in paths]
+        self.name = "gcn-ensemble:" + "+".join(m.path.name for m in self.members)
+
+    def act(self, observation: dict) -> int:
+        from agents.gcn.distribution import masked_logits
+
+        logps = []
         with torch.no_grad():
-            if self.deterministic:
-                return int(self.actor(obs).item())
-            probs = self.actor.action_probabilities(obs)
-            return int(torch.multinomial(probs, 1, generator=self.generator).item())
+            for m in self.members:
+                obs = m.checked_tensors(observation)
+                logits = masked_logits(m.actor.logits(obs), obs["action_mask"])
+                logps.append(torch.log_softmax(logits, dim=-1)[0])
+        logp = torch.stack(logps).mean(0)
+        mask = torch.as_tensor(np.asarray(observation["action_mask"]), dtype=torch.bool)
+        return int(torch.where(mask, logp, -torch.inf).argmax().item())
