@@ -172,10 +172,12 @@ class GCNEnsemble(Controller):
     def act(self, observation: dict) -> int:
         from agents.gcn.distribution import masked_logits
 
+        # Every member reads this version's feature schema (GCNController refuses others), so
+        # one checked batch serves them all.
+        obs = self.members[0].checked_tensors(observation)
         logps = []
         with torch.no_grad():
             for m in self.members:
-                obs = m.checked_tensors(observation)
                 logits = masked_logits(m.actor.logits(obs), obs["action_mask"])
                 logps.append(torch.log_softmax(logits, dim=-1)[0])
         logp = torch.stack(logps).mean(0)
