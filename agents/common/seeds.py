@@ -16,6 +16,10 @@ EVAL_SEEDS = tuple(range(EVAL_SEED_BASE, EVAL_SEED_BASE + 1000))
 #: First seed of the warm start's demonstration days (agents/gcn/train/imitation.py), in the
 #: training range: ``WARM_START_SEED_BASE + 1000 * train seed + 100 * round + day``.
 WARM_START_SEED_BASE = 700_000
+#: First seed of the days the ensemble of imitation fits drives before its distillation
+#: (agents/gcn/train/ensemble.py), in the training range: ``ENSEMBLE_SEED_BASE + 1000 * train
+#: seed + day``.
+ENSEMBLE_SEED_BASE = 610_000
 
 
 def training_seed(index: int) -> int:

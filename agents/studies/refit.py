@@ -3,7 +3,8 @@ weights with other seeds.
 
 A training run keeps every decision its warm start was fit on (``warmstart_state.pt``). This
 study fits that data again, once per seed, exactly as the run did (its ``pretrain`` epochs,
-batch size, learning rate and regret weights) but from weights drawn afresh with that seed,
+batch size, learning rate and regret weights) but from weights drawn afresh with seed
+``1000 + k`` (``agents.gcn.train.ensemble.refit_actor``, which the pipeline's ensemble stage uses),
 and writes each actor as a checkpoint that the evaluation loads like the run's own
 ``model_warmstart.pt``. The spread of their scores on the same days is what the fit alone
 contributes; a later training stage has to beat it to be told apart from a lucky fit
@@ -32,10 +33,6 @@ import torch
 
 from agents.common.files import write_atomic
 
-#: Offset of the refits' seeds, so that refit ``k`` draws neither a run's seed nor its fit's.
-REFIT_SEED_BASE = 1000
-
-
 def refit(run_dir: str | Path, seeds: Sequence[int], out_dir: str | Path,
           log: Callable[[str], None] = print) -> list[Path]:
     """Fit the warm-start data of ``run_dir`` once per seed from fresh weights; return the
@@ -46,7 +43,8 @@ def refit(run_dir: str | Path, seeds: Sequence[int], out_dir: str | Path,
             (the message names it).
     """
     from agents.gcn.policy import GCNController, read_checkpoint
-    from agents.gcn.train.imitation import fit_actor, load_warm_start_state
+    from agents.gcn.train.ensemble import REFIT_SEED_BASE, refit_actor
+    from agents.gcn.train.imitation import load_warm_start_state
     from agents.gcn.train.pipeline import WARM_STATE, load_train_config
 
     run_dir, out_dir = Path(run_dir), Path(out_dir)
@@ -63,14 +61,9 @@ def refit(run_dir: str | Path, seeds: Sequence[int], out_dir: str | Path,
     torch.set_num_threads(1)
     written = []
     for seed in seeds:
-        actor = GCNController(content).actor  # the run's architecture; weights drawn again below
-        torch.manual_seed(REFIT_SEED_BASE + seed)
-        for module in actor.modules():
-            if module is not actor and hasattr(module, "reset_parameters"):
-                module.reset_parameters()
-        stats = fit_actor(actor, data, pre.epochs, pre.batch_size, pre.learning_rate,
-                          REFIT_SEED_BASE + seed, lambda _line: None, f"refit {seed}",
-                          pre.regret_cap)
+        # The run's architecture, its weights drawn again (as the pipeline's ensemble stage does).
+        actor, stats = refit_actor(GCNController(content).actor, data, pre,
+                                   REFIT_SEED_BASE + seed)
         out = {**content, "actor_state_dict": {k: v.detach().clone()
                                                for k, v in actor.state_dict().items()}}
         out["infos"] = {**content["infos"], "refit": {"of": str(warm), "seed": int(seed),

@@ -288,6 +288,18 @@ def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: 
 ROUND_METRICS = TRAINING_METRICS
 
 
+def padded_sizes(env_config: dict[str, Any] | list[dict[str, Any]]) -> tuple[int, int] | None:
+    """``(max_nodes, max_evtols)`` over a list of env configs (the size days of several
+    vertiports are padded to); ``None`` for a single config (no padding)."""
+    if not isinstance(env_config, list):
+        return None
+    from marl_vertiport.config import from_dict
+    from marl_vertiport.sim.layout import Layout
+
+    built = [from_dict(c) for c in env_config]
+    return max(Layout.from_config(c).n_nodes for c in built), max(c.fleet_size for c in built)
+
+
 def day_score(metrics: dict[str, Any], lost_vehicle_penalty: float) -> float:
     """What a fit is scored by on a day it drove: the paper's total reward minus
     ``lost_vehicle_penalty`` per vehicle lost (the training reward's lost-vehicle term)."""
@@ -328,13 +340,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     made_with = {"pretrain": {k: v for k, v in dataclasses.asdict(pre).items() if k != "workers"},
                  "seed": cfg.seed, "env_config": env_config, "model": dataclasses.asdict(cfg.model),
                  "lost_vehicle_penalty": cfg.lost_vehicle_penalty}
-    sizes = None
-    if isinstance(env_config, list):
-        from marl_vertiport.config import from_dict
-        from marl_vertiport.sim.layout import Layout
-
-        built = [from_dict(c) for c in env_config]
-        sizes = (max(Layout.from_config(c).n_nodes for c in built), max(c.fleet_size for c in built))
+    sizes = padded_sizes(env_config)
     state: dict[str, Any] = {"next_round": 0, "data": None, "fits": [], "scores": [], "stats": {},
                              "records": [], "env_steps": 0, "made_with": made_with}
     if state_path is not None and state_path.exists():

@@ -34,7 +34,10 @@ import yaml
 
 from agents.common.files import write_atomic
 from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
-from agents.gcn.train.imitation import ROUND_METRICS, TEACHERS, warm_start
+from agents.gcn.train.ensemble import distil_ensemble
+from agents.gcn.train.imitation import (
+    ROUND_METRICS, TEACHERS, load_warm_start_state, padded_sizes, warm_start,
+)
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
 from agents.gcn.train.log_writer import register_listener, unregister_listener
@@ -139,6 +142,22 @@ class EvaluationConfig:
 
 
 @dataclass(frozen=True)
+class EnsembleConfig:
+    """Distillation of an ensemble of imitation fits after the warm start
+    (agents/gcn/train/ensemble.py)."""
+
+    fits: int = 0
+    """Refits of the warm start's demonstrations from fresh weights; with the warm start they
+    form the ensemble (0: no ensemble stage)."""
+    days: int = 10
+    """Full training days the ensemble drives; their states join the demonstrations."""
+    epochs: int = 8
+    """Passes of the distillation over those states and the demonstrations."""
+    batch_size: int = 256
+    learning_rate: float = 3e-4
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     mode: str = "multi_agent"
     """``multi_agent`` (AEC, one row per eVTOL, critic on ``state()``) or ``single_agent``."""
@@ -187,6 +206,7 @@ class TrainConfig:
     improves, comes closer to the greedy policy that is deployed. The greedy actions stay
     those of the warm start. 1: as imitated."""
     pretrain: PretrainConfig = field(default_factory=PretrainConfig)
+    ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
     algorithm: AlgorithmConfig = field(default_factory=AlgorithmConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
@@ -215,6 +235,12 @@ class TrainConfig:
             (self.warm_start_temperature == 1.0
              or (self.pretrain.days > 0 and self.pretrain.epochs > 0), "warm_start_temperature",
              "sharpens the warm start: it needs pretrain.days and pretrain.epochs > 0"),
+            (self.ensemble.fits >= 0, "ensemble.fits", "must be >= 0"),
+            (self.ensemble.fits == 0 or (self.pretrain.days > 0 and self.pretrain.epochs > 0),
+             "ensemble.fits", "refits the warm start: it needs pretrain.days and pretrain.epochs > 0"),
+            (self.ensemble.days >= 1 and self.ensemble.epochs >= 1 and self.ensemble.batch_size >= 1,
+             "ensemble", "days, epochs and batch_size must be >= 1"),
+            (self.ensemble.learning_rate > 0, "ensemble.learning_rate", "must be > 0"),
             (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
              "pretrain", "days, epochs and dagger_rounds must be >= 0"),
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
@@ -504,6 +530,16 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
                            state_path=state_path, on_round=on_round, backend=backend)
         if stats:
             runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
+            if cfg.ensemble.fits:
+                ens_stats, refits = distil_ensemble(
+                    runner.alg.actor, cfg, warm_envs, load_warm_start_state(state_path)["data"],
+                    padded_sizes(warm_envs), log=log, backend=backend)
+                if rank == 0:
+                    for k, content in enumerate(refits, start=1):
+                        buf = io.BytesIO()
+                        torch.save(content, buf)
+                        write_atomic(run_dir / f"model_refit{k}.pt", buf.getvalue())
+                runner.save(str(run_dir / "model_distilled.pt"), {"warm_start": {**stats, **ens_stats}})
             if cfg.warm_start_temperature != 1.0:
                 runner.alg.actor.sharpen(cfg.warm_start_temperature)
                 log(f"warm start sharpened: logits / {cfg.warm_start_temperature:g} "

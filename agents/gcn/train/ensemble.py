@@ -1,0 +1,207 @@
+"""Distillation of an ensemble of imitation fits into the actor (after the warm start).
+
+Fits of the same demonstrations from different initial weights play quite differently (up to
+about 300 points a day apart on the same days; docs/training.md, "Is it the stage, or the
+fit?"), so one warm start is one draw from a lottery. This stage averages the lottery out:
+
+1. **Refits.** The warm start's decisions (``warmstart_state.pt``) are fit ``ensemble.fits``
+   more times, each from weights drawn afresh with seed ``REFIT_SEED_BASE + k`` and otherwise
+   exactly as the warm start was fit (:func:`refit_actor`; the same function as
+   ``python -m agents.studies.refit``).
+2. **Ensemble days.** The warm-started actor and its refits, as one controller
+   (:class:`agents.gcn.policy.GCNEnsemble`: the legal action of largest mean log-probability),
+   drive ``ensemble.days`` full training days (the scenarios in turn; seeds
+   ``ENSEMBLE_SEED_BASE + 1000 * seed + d``) as tasks of the execution layer; the states with a
+   choice are kept.
+3. **Distillation.** On those states and the demonstrations, the actor (the warm start's
+   weights) is trained for ``ensemble.epochs`` epochs to match the ensemble's policy, the
+   softmax of the members' mean log-probabilities (cross-entropy to soft targets).
+
+Every step is seeded; a run gives the same actor on any backend.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+import torch
+
+from agents.common.seeds import ENSEMBLE_SEED_BASE, training_seed
+from agents.execution import INTERRUPTED, Backend, LocalBackend
+from agents.gcn.train.imitation import (
+    ACTOR_GROUPS, _learner, fit_actor, pad_day, to_tensordict,
+)
+
+#: Offset of the refits' seeds: refit ``k`` draws its weights and batches with ``REFIT_SEED_BASE + k``.
+REFIT_SEED_BASE = 1000
+
+
+def refit_actor(actor, data: dict[str, np.ndarray], pre, seed: int):
+    """A copy of ``actor`` with every layer's weights drawn afresh from ``seed``, then fit on
+    ``data`` as the warm start fits (``pre``: the run's ``pretrain`` settings). ``actor`` is
+    not changed. Returns the copy and the fit's statistics."""
+    fresh = copy.deepcopy(actor).to("cpu")
+    torch.manual_seed(seed)
+    for module in fresh.modules():
+        if module is not fresh and hasattr(module, "reset_parameters"):
+            module.reset_parameters()
+    stats = fit_actor(fresh, data, pre.epochs, pre.batch_size, pre.learning_rate, seed,
+                      lambda _line: None, f"refit {seed}", pre.regret_cap)
+    return fresh, stats
+
+
+@dataclass(frozen=True)
+class EnsembleDay:
+    """One full day driven by an ensemble (checkpoint contents of its members)."""
+
+    env_config: dict[str, Any]
+    seed: int
+    steps: int
+    members: tuple[dict[str, Any], ...]
+
+
+def drive_day(task: EnsembleDay) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Run one day with the ensemble; return the observations of the steps with a choice (the
+    ensemble's action as ``label``, shape ``(T,)``) and the day's metrics."""
+    from agents.gcn.policy import GCNEnsemble
+    from marl_vertiport.config import from_dict
+    from marl_vertiport.gym_env import VertiportEnv
+
+    torch.set_num_threads(1)
+    env = VertiportEnv(config=from_dict(task.env_config))
+    ensemble = GCNEnsemble(list(task.members))
+    obs, _ = env.reset(seed=task.seed)
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
+    labels: list[int] = []
+    for _ in range(task.steps):
+        mask = obs["action_mask"]
+        if int(mask.sum()) > 1:
+            action = ensemble.act(obs)
+            for key in ACTOR_GROUPS[:3]:
+                rows[key].append(obs["observation"][key])
+            rows["action_mask"].append(mask)
+            labels.append(action)
+        else:
+            action = int(np.argmax(mask))
+        obs, _, _, truncated, _ = env.step(action)
+        if truncated:
+            break
+    metrics = env.sim.episode_metrics()
+    env.close()
+    data = {k: np.stack(v) for k, v in rows.items()}
+    data["label"] = np.asarray(labels, dtype=np.int64)
+    data["regret"] = np.zeros(len(labels), dtype=np.float32)
+    return data, metrics
+
+
+def ensemble_targets(members: list, obs) -> torch.Tensor:
+    """``(N, A)`` the ensemble's policy on a batch: the softmax of the members' mean masked
+    log-probabilities (their normalised geometric mean), 0 on illegal actions."""
+    from agents.gcn.distribution import masked_logits
+
+    mask = obs["action_mask"].bool()
+    with torch.no_grad():
+        logp = torch.stack([torch.log_softmax(masked_logits(m.logits(obs), mask), dim=-1)
+                            for m in members]).mean(0)
+        return torch.softmax(logp.masked_fill(~mask, torch.finfo(logp.dtype).min), dim=-1)
+
+
+def distil(student, members: list, data: dict[str, np.ndarray], epochs: int, batch_size: int,
+           learning_rate: float, seed: int, log: Callable[[str], None]) -> dict[str, float]:
+    """Train ``student`` to match the ensemble's policy (:func:`ensemble_targets`) on ``data``:
+    cross-entropy to the soft targets, Adam, gradients clipped at norm 1."""
+    from agents.gcn.distribution import masked_logits
+
+    obs = to_tensordict(data)
+    target = ensemble_targets(members, obs)
+    opt = torch.optim.Adam(student.parameters(), lr=learning_rate)
+    gen = torch.Generator().manual_seed(seed)
+    n = len(target)
+    stats: dict[str, float] = {}
+    student.train()
+    for epoch in range(epochs):
+        perm = torch.randperm(n, generator=gen)
+        loss_sum = agree = 0.0
+        for i in range(0, n, batch_size):
+            idx = perm[i:i + batch_size]
+            batch = obs[idx]
+            logp = torch.log_softmax(masked_logits(student.logits(batch), batch["action_mask"]), -1)
+            loss = -(target[idx] * logp).sum(-1).mean()
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(student.parameters(), 1.0)
+            opt.step()
+            loss_sum += float(loss.detach()) * len(idx)
+            agree += float((logp.argmax(-1) == target[idx].argmax(-1)).sum())
+        stats = {"distill_cross_entropy": loss_sum / n, "distill_agreement": agree / n,
+                 "distill_samples": float(n)}
+        log(f"  distillation epoch {epoch + 1}/{epochs}: cross-entropy {loss_sum / n:.3f}, "
+            f"greedy agreement with the ensemble {agree / n:.1%} on {n} decisions")
+    return stats
+
+
+def distil_ensemble(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
+                    data: dict[str, np.ndarray], sizes: tuple[int, int] | None,
+                    log: Callable[[str], None] = print,
+                    backend: Backend | None = None) -> tuple[dict[str, float], list[dict[str, Any]]]:
+    """The stage of the module docstring on the warm-started ``actor`` (changed in place) and
+    the warm start's decisions ``data``; ``cfg`` is the run's ``TrainConfig``, ``sizes`` the
+    ``(max_nodes, max_evtols)`` the days are padded to (several scenarios). Returns the
+    statistics and the refits' checkpoint contents.
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C stopped the ensemble days.
+        RuntimeError: a day failed, or a worker or node was lost for good.
+    """
+    ens, pre = cfg.ensemble, cfg.pretrain
+    device = next(actor.parameters()).device
+    actor.to("cpu")
+    members, refits = [actor], []
+    for k in range(1, ens.fits + 1):
+        start = time.time()
+        fresh, stats = refit_actor(actor, data, pre, REFIT_SEED_BASE + k)
+        members.append(fresh)
+        refits.append(_learner(fresh, env_config, cfg))
+        log(f"ensemble: refit {k}/{ens.fits} of the demonstrations from fresh weights "
+            f"({time.time() - start:.0f} s): cross-entropy {stats['cross_entropy']:.3f}, "
+            f"teacher-action accuracy {stats['accuracy']:.1%}")
+    contents = tuple(_learner(m, env_config, cfg) for m in members)
+    scenarios = env_config if isinstance(env_config, list) else [env_config]
+    base = ENSEMBLE_SEED_BASE + 1000 * cfg.seed
+    tasks = [EnsembleDay(scenarios[d % len(scenarios)], training_seed(base + d), pre.day_steps,
+                         contents) for d in range(ens.days)]
+    backend = backend or LocalBackend(pre.workers)
+    log(f"ensemble: the warm start and its {ens.fits} refits drive {ens.days} days "
+        f"({backend.describe()})")
+    start = time.time()
+    results: dict[int, tuple[dict[str, np.ndarray], dict[str, Any]]] = {}
+
+    def report(i: int, result) -> bool:
+        results[i] = result
+        m = result[1]
+        log(f"  ensemble days: episode {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
+            f"{m['steps']} steps, reward {m['total_reward']:.0f}, lost {m['stranded_air']} air / "
+            f"{m['stranded_ground']} ground, {len(result[0]['label'])} decisions")
+        return True
+
+    problem = backend.run(drive_day, tasks, report)
+    if problem == INTERRUPTED:
+        raise KeyboardInterrupt
+    if problem is not None:
+        raise RuntimeError(f"ensemble days: {problem}")
+    days = [results[i][0] for i in range(len(tasks))]  # task order: independent of the backend
+    if sizes is not None:
+        days = [pad_day(d, *sizes) for d in days]
+    both = {k: np.concatenate([data[k], *(d[k] for d in days)]) for k in data}
+    rewards = [results[i][1]["total_reward"] for i in range(len(tasks))]
+    log(f"ensemble: distilling into the actor ({len(data['label'])} demonstration and "
+        f"{len(both['label']) - len(data['label'])} ensemble-day decisions)")
+    stats = distil(actor, members, both, ens.epochs, ens.batch_size, ens.learning_rate,
+                   cfg.seed, log)
+    actor.to(device)
+    stats["ensemble_day_reward"] = float(np.mean(rewards))
+    return stats, refits
