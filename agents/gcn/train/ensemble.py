@@ -31,10 +31,8 @@ import numpy as np
 import torch
 
 from agents.common.seeds import ENSEMBLE_SEED_BASE, training_seed
-from agents.execution import INTERRUPTED, Backend, LocalBackend
-from agents.gcn.train.imitation import (
-    ACTOR_GROUPS, _learner, fit_actor, pad_day, to_tensordict,
-)
+from agents.execution import Backend, LocalBackend
+from agents.gcn.train.imitation import ACTOR_GROUPS, _learner, collect, fit_actor, to_tensordict
 
 #: Offset of the refits' seeds: refit ``k`` draws its weights and batches with ``REFIT_SEED_BASE + k``.
 REFIT_SEED_BASE = 1000
@@ -113,35 +111,14 @@ def ensemble_targets(members: list, obs) -> torch.Tensor:
 def distil(student, members: list, data: dict[str, np.ndarray], epochs: int, batch_size: int,
            learning_rate: float, seed: int, log: Callable[[str], None]) -> dict[str, float]:
     """Train ``student`` to match the ensemble's policy (:func:`ensemble_targets`) on ``data``:
-    cross-entropy to the soft targets, Adam, gradients clipped at norm 1."""
-    from agents.gcn.distribution import masked_logits
-
-    obs = to_tensordict(data)
-    target = ensemble_targets(members, obs)
-    opt = torch.optim.Adam(student.parameters(), lr=learning_rate)
-    gen = torch.Generator().manual_seed(seed)
-    n = len(target)
-    stats: dict[str, float] = {}
-    student.train()
-    for epoch in range(epochs):
-        perm = torch.randperm(n, generator=gen)
-        loss_sum = agree = 0.0
-        for i in range(0, n, batch_size):
-            idx = perm[i:i + batch_size]
-            batch = obs[idx]
-            logp = torch.log_softmax(masked_logits(student.logits(batch), batch["action_mask"]), -1)
-            loss = -(target[idx] * logp).sum(-1).mean()
-            opt.zero_grad()
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(student.parameters(), 1.0)
-            opt.step()
-            loss_sum += float(loss.detach()) * len(idx)
-            agree += float((logp.argmax(-1) == target[idx].argmax(-1)).sum())
-        stats = {"distill_cross_entropy": loss_sum / n, "distill_agreement": agree / n,
-                 "distill_samples": float(n)}
-        log(f"  distillation epoch {epoch + 1}/{epochs}: cross-entropy {loss_sum / n:.3f}, "
-            f"greedy agreement with the ensemble {agree / n:.1%} on {n} decisions")
-    return stats
+    :func:`~agents.gcn.train.imitation.fit_actor` with the ensemble's probabilities as soft
+    targets (every decision weighing 1)."""
+    target = ensemble_targets(members, to_tensordict(data))
+    plain = {**data, "regret": np.zeros(len(target), dtype=np.float32)}
+    stats = fit_actor(student, plain, epochs, batch_size, learning_rate, seed, log,
+                      "distillation", soft_targets=target)
+    return {"distill_cross_entropy": stats["cross_entropy"],
+            "distill_agreement": stats["accuracy"], "distill_samples": stats["samples"]}
 
 
 def distil_ensemble(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
@@ -177,27 +154,9 @@ def distil_ensemble(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]
     backend = backend or LocalBackend(pre.workers)
     log(f"ensemble: the warm start and its {ens.fits} refits drive {ens.days} days "
         f"({backend.describe()})")
-    start = time.time()
-    results: dict[int, tuple[dict[str, np.ndarray], dict[str, Any]]] = {}
-
-    def report(i: int, result) -> bool:
-        results[i] = result
-        m = result[1]
-        log(f"  ensemble days: episode {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
-            f"{m['steps']} steps, reward {m['total_reward']:.0f}, lost {m['stranded_air']} air / "
-            f"{m['stranded_ground']} ground, {len(result[0]['label'])} decisions")
-        return True
-
-    problem = backend.run(drive_day, tasks, report)
-    if problem == INTERRUPTED:
-        raise KeyboardInterrupt
-    if problem is not None:
-        raise RuntimeError(f"ensemble days: {problem}")
-    days = [results[i][0] for i in range(len(tasks))]  # task order: independent of the backend
-    if sizes is not None:
-        days = [pad_day(d, *sizes) for d in days]
-    both = {k: np.concatenate([data[k], *(d[k] for d in days)]) for k in data}
-    rewards = [results[i][1]["total_reward"] for i in range(len(tasks))]
+    new, metrics = collect(tasks, backend, log, "ensemble days", sizes, run_day=drive_day)
+    both = {k: np.concatenate([data[k], new[k]]) for k in data}
+    rewards = [m["total_reward"] for m in metrics]
     log(f"ensemble: distilling into the actor ({len(data['label'])} demonstration and "
         f"{len(both['label']) - len(data['label'])} ensemble-day decisions)")
     stats = distil(actor, members, both, ens.epochs, ens.batch_size, ens.learning_rate,

@@ -147,12 +147,13 @@ def pad_day(data: dict[str, np.ndarray], max_nodes: int, max_evtols: int) -> dic
 
 
 def collect(tasks: list[DayTask], backend: Backend | int, log: Callable[[str], None], tag: str,
-            sizes: tuple[int, int] | None = None
+            sizes: tuple[int, int] | None = None, run_day: Callable = label_day,
             ) -> tuple[dict[str, np.ndarray], list[dict[str, Any]]]:
     """Run ``tasks`` on ``backend`` (:mod:`agents.execution`; an int: that many local worker
     processes, 1 in this process), logging each day; returns their decisions concatenated in
     task order and each task's metrics, the same on any backend. ``sizes``: ``(max_nodes,
-    max_evtols)`` to pad every day to (days of different vertiports).
+    max_evtols)`` to pad every day to (days of different vertiports). ``run_day(task)`` runs
+    one task and returns its decisions (with ``label``) and metrics (default :func:`label_day`).
 
     Raises:
         KeyboardInterrupt: Ctrl-C stopped the round (nothing of it is kept).
@@ -172,7 +173,7 @@ def collect(tasks: list[DayTask], backend: Backend | int, log: Callable[[str], N
             f"{len(result[0]['label'])} decisions")
         return True
 
-    problem = backend.run(label_day, tasks, report)
+    problem = backend.run(run_day, tasks, report)
     if problem == INTERRUPTED:
         raise KeyboardInterrupt
     if problem is not None:
@@ -204,13 +205,17 @@ def label_weights(regret: np.ndarray, cap: float) -> np.ndarray:
 
 
 def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, learning_rate: float,
-              seed: int, log: Callable[[str], None], tag: str, regret_cap: float = 0.0) -> dict[str, float]:
+              seed: int, log: Callable[[str], None], tag: str, regret_cap: float = 0.0,
+              soft_targets: torch.Tensor | None = None) -> dict[str, float]:
     """Cross-entropy of the actor's masked softmax on the teacher's labels, each decision
-    weighted by :func:`label_weights` (``regret_cap`` 0: all weights 1)."""
+    weighted by :func:`label_weights` (``regret_cap`` 0: all weights 1). ``soft_targets``
+    (``(N, A)`` probabilities): the cross-entropy to these instead (distillation), accuracy
+    counted against their most likely action."""
     from agents.gcn.distribution import masked_logits
 
     obs = to_tensordict(data)
-    target = torch.from_numpy(data["label"])
+    target = (torch.from_numpy(data["label"]) if soft_targets is None
+              else soft_targets.argmax(-1))
     weight = torch.from_numpy(label_weights(data["regret"], regret_cap)).float()
     opt = torch.optim.Adam(actor.parameters(), lr=learning_rate)
     gen = torch.Generator().manual_seed(seed)
@@ -225,7 +230,10 @@ def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, 
             batch = obs[idx]
             logp = torch.log_softmax(masked_logits(actor.logits(batch), batch["action_mask"]), dim=-1)
             w = weight[idx]
-            ce = -(logp.gather(-1, target[idx].unsqueeze(-1)).squeeze(-1) * w).sum() / w.sum()
+            if soft_targets is None:
+                ce = -(logp.gather(-1, target[idx].unsqueeze(-1)).squeeze(-1) * w).sum() / w.sum()
+            else:
+                ce = -((soft_targets[idx] * logp).sum(-1) * w).sum() / w.sum()
             opt.zero_grad()
             ce.backward()
             torch.nn.utils.clip_grad_norm_(actor.parameters(), 1.0)
