@@ -104,3 +104,50 @@ def test_missing_ray_extra_is_one_line_saying_how_to_install_it(no_ray, tmp_path
         assert err_lines == [f"error: the ray backend needs the optional ray extra: "
                              f"{RAY_EXTRA_HINT}"]
     assert not (tmp_path / "out").exists()  # nothing was run or written
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_workers_end_when_their_driver_is_killed(tmp_path):
+    """A driver killed outright (SIGKILL: no chance to shut its pool down) leaves no worker
+    going on with the queued tasks."""
+    import os
+    import signal
+    import subprocess
+    import textwrap
+    import time
+
+    (tmp_path / "helper.py").write_text(textwrap.dedent("""
+        import os, time
+        from pathlib import Path
+
+        def linger(folder):
+            Path(folder, str(os.getpid())).write_text("")
+            time.sleep(60)
+    """))
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    driver = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys; from agents.execution import LocalBackend; import helper; "
+         f"LocalBackend(2).run(helper.linger, [{str(pids)!r}] * 4, lambda i, r: True)"],
+        cwd=tmp_path, env={**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{tmp_path}"})
+    deadline = time.time() + 60
+    while len(list(pids.iterdir())) < 2 and time.time() < deadline:
+        time.sleep(0.2)
+    workers = [int(p.name) for p in pids.iterdir()]
+    assert len(workers) == 2, "the workers did not start"
+    driver.send_signal(signal.SIGKILL)
+    driver.wait()
+
+    def alive(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        with open(f"/proc/{pid}/stat") as f:  # a zombie waiting to be reaped has ended
+            return f.read().split(")")[-1].split()[0] != "Z"
+
+    deadline = time.time() + 15
+    while any(alive(pid) for pid in workers) and time.time() < deadline:
+        time.sleep(0.2)
+    assert not any(alive(pid) for pid in workers)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from typing import Any, Callable, Sequence
 
@@ -13,8 +14,28 @@ from agents.execution.base import INTERRUPTED, Backend, OnResult, first_line, ta
 
 
 def _worker_init() -> None:
-    """Workers ignore Ctrl-C: the driver stops handing out work and lets them finish."""
+    """Workers ignore Ctrl-C: the driver stops handing out work and lets them finish. On Linux
+    they also end with the driver: a driver killed outright (SIGTERM, SIGKILL, out of memory)
+    cannot shut its pool down, and its workers would otherwise go on with the tasks queued."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _end_with_parent()
+
+
+def _end_with_parent() -> None:
+    """Ask the kernel to send this process SIGTERM when the thread that started it ends
+    (``prctl(PR_SET_PDEATHSIG)``; the driver's thread waits in :meth:`LocalBackend.run` for as
+    long as the pool lives). Elsewhere than Linux: nothing."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() == 1:  # the driver died before the request was made
+        os._exit(1)
 
 
 class LocalBackend(Backend):
