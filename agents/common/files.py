@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
@@ -23,6 +24,18 @@ def write_atomic(path: Path, data: bytes | str) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def write_torch_atomic(path: Path, obj: Any) -> None:
+    """``torch.save(obj)`` to ``path`` through :func:`write_atomic` (tensors and plain data,
+    so that ``torch.load(..., weights_only=True)`` reads it back)."""
+    import io
+
+    import torch
+
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    write_atomic(path, buf.getvalue())
 
 
 def _umask() -> int:

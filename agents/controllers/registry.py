@@ -92,6 +92,11 @@ def _import(path: str, spec: str) -> Any:
     return obj
 
 
+def _checkpoint_path(spec: str) -> Path:
+    """The file a checkpoint spec names: ``gcn`` is the shipped checkpoint, else a path."""
+    return SHIPPED_CHECKPOINT if spec == "gcn" else Path(spec)
+
+
 def make_controller(spec: str) -> Any:
     """Build the controller named by ``spec``.
 
@@ -102,17 +107,15 @@ def make_controller(spec: str) -> Any:
         from agents.gcn.policy import CheckpointError, GCNEnsemble
 
         try:  # checkpoints joined by "+": their ensemble
-            return GCNEnsemble([SHIPPED_CHECKPOINT if p == "gcn" else Path(p)
-                                for p in spec.split("+")])
+            return GCNEnsemble([_checkpoint_path(p) for p in spec.split("+")])
         except CheckpointError as exc:
             raise AgentSpecError(f"agent {spec!r}: {exc}") from exc
     target_spec, kwargs = split_spec(spec)
     if target_spec == "gcn" or target_spec.endswith(".pt"):
         from agents.gcn.policy import CheckpointError, GCNController
 
-        path = SHIPPED_CHECKPOINT if target_spec == "gcn" else Path(target_spec)
         try:
-            return GCNController(path, **kwargs)
+            return GCNController(_checkpoint_path(target_spec), **kwargs)
         except CheckpointError as exc:
             raise AgentSpecError(f"agent {spec!r}: {exc}") from exc
         except TypeError as exc:  # an argument GCNController does not take

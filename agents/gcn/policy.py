@@ -148,6 +148,16 @@ class GCNController(Controller):
         return obs
 
 
+def mean_log_probabilities(actors: list, obs: TensorDict) -> torch.Tensor:
+    """``(B, A)`` the members' masked log-probabilities on a batch, averaged over ``actors``
+    (an ensemble's policy, up to normalisation); very negative on illegal actions."""
+    from agents.gcn.distribution import masked_logits
+
+    with torch.no_grad():
+        return torch.stack([torch.log_softmax(masked_logits(a.logits(obs), obs["action_mask"]),
+                                              dim=-1) for a in actors]).mean(0)
+
+
 class GCNEnsemble(Controller):
     """Several trained GCN actors as one controller: the legal action with the largest mean
     log-probability over the members (their geometric-mean policy), greedily.
@@ -170,16 +180,9 @@ class GCNEnsemble(Controller):
         self.name = "gcn-ensemble:" + "+".join(m.path.name for m in self.members)
 
     def act(self, observation: dict) -> int:
-        from agents.gcn.distribution import masked_logits
-
         # Every member reads this version's feature schema (GCNController refuses others), so
         # one checked batch serves them all.
         obs = self.members[0].checked_tensors(observation)
-        logps = []
-        with torch.no_grad():
-            for m in self.members:
-                logits = masked_logits(m.actor.logits(obs), obs["action_mask"])
-                logps.append(torch.log_softmax(logits, dim=-1)[0])
-        logp = torch.stack(logps).mean(0)
+        logp = mean_log_probabilities([m.actor for m in self.members], obs)[0]
         mask = torch.as_tensor(np.asarray(observation["action_mask"]), dtype=torch.bool)
         return int(torch.where(mask, logp, -torch.inf).argmax().item())

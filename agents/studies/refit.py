@@ -24,14 +24,14 @@ only read (its files are loaded as tensors and plain data, never as pickled code
 from __future__ import annotations
 
 import argparse
-import io
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
 import torch
 
-from agents.common.files import write_atomic
+from agents.common.files import write_torch_atomic
+
 
 def refit(run_dir: str | Path, seeds: Sequence[int], out_dir: str | Path,
           log: Callable[[str], None] = print) -> list[Path]:
@@ -68,10 +68,8 @@ def refit(run_dir: str | Path, seeds: Sequence[int], out_dir: str | Path,
                                                for k, v in actor.state_dict().items()}}
         out["infos"] = {**content["infos"], "refit": {"of": str(warm), "seed": int(seed),
                                                       **{k: float(v) for k, v in stats.items()}}}
-        buf = io.BytesIO()
-        torch.save(out, buf)
         path = out_dir / f"model_refit{seed}.pt"
-        write_atomic(path, buf.getvalue())
+        write_torch_atomic(path, out)
         written.append(path)
         log(f"refit {seed}: cross-entropy {stats['cross_entropy']:.3f}, teacher-action accuracy "
             f"{stats['accuracy']:.1%} on {int(stats['samples'])} decisions -> {path}")

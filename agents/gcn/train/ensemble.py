@@ -98,14 +98,13 @@ def drive_day(task: EnsembleDay) -> tuple[dict[str, np.ndarray], dict[str, Any]]
 
 def ensemble_targets(members: list, obs) -> torch.Tensor:
     """``(N, A)`` the ensemble's policy on a batch: the softmax of the members' mean masked
-    log-probabilities (their normalised geometric mean), 0 on illegal actions."""
-    from agents.gcn.distribution import masked_logits
+    log-probabilities (:func:`agents.gcn.policy.mean_log_probabilities`; their normalised
+    geometric mean), 0 on illegal actions."""
+    from agents.gcn.policy import mean_log_probabilities
 
     mask = obs["action_mask"].bool()
-    with torch.no_grad():
-        logp = torch.stack([torch.log_softmax(masked_logits(m.logits(obs), mask), dim=-1)
-                            for m in members]).mean(0)
-        return torch.softmax(logp.masked_fill(~mask, torch.finfo(logp.dtype).min), dim=-1)
+    logp = mean_log_probabilities(members, obs)
+    return torch.softmax(logp.masked_fill(~mask, torch.finfo(logp.dtype).min), dim=-1)
 
 
 def distil(student, members: list, data: dict[str, np.ndarray], epochs: int, batch_size: int,
@@ -137,12 +136,11 @@ def distil_ensemble(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]
     ens, pre = cfg.ensemble, cfg.pretrain
     device = next(actor.parameters()).device
     actor.to("cpu")
-    members, refits = [actor], []
+    members = [actor]
     for k in range(1, ens.fits + 1):
         start = time.time()
         fresh, stats = refit_actor(actor, data, pre, REFIT_SEED_BASE + k)
         members.append(fresh)
-        refits.append(_learner(fresh, env_config, cfg))
         log(f"ensemble: refit {k}/{ens.fits} of the demonstrations from fresh weights "
             f"({time.time() - start:.0f} s): cross-entropy {stats['cross_entropy']:.3f}, "
             f"teacher-action accuracy {stats['accuracy']:.1%}")
@@ -163,4 +161,4 @@ def distil_ensemble(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]
                    cfg.seed, log)
     actor.to(device)
     stats["ensemble_day_reward"] = float(np.mean(rewards))
-    return stats, refits
+    return stats, list(contents[1:])

@@ -25,7 +25,6 @@ driven by the last fit scores it; nothing is fit on it, so no teacher runs there
 from __future__ import annotations
 
 import dataclasses
-import io
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,7 +34,7 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
-from agents.common.files import write_atomic
+from agents.common.files import write_torch_atomic
 from agents.execution import INTERRUPTED, Backend, LocalBackend
 from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
@@ -424,9 +423,7 @@ def save_warm_start_state(path: Path, state: dict[str, Any]) -> None:
     data = state.get("data")
     if isinstance(data, dict):
         data = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in data.items()}
-    buf = io.BytesIO()
-    torch.save({**state, "data": data, "torch_rng": torch.get_rng_state()}, buf)
-    write_atomic(path, buf.getvalue())
+    write_torch_atomic(path, {**state, "data": data, "torch_rng": torch.get_rng_state()})
 
 
 def load_warm_start_state(path: Path) -> dict[str, Any]:

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 import yaml
 
-from agents.common.files import write_atomic
+from agents.common.files import write_atomic, write_torch_atomic
 from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
 from agents.gcn.train.ensemble import distil_ensemble
 from agents.gcn.train.imitation import (
@@ -536,9 +536,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
                     padded_sizes(warm_envs), log=log, backend=backend)
                 if rank == 0:
                     for k, content in enumerate(refits, start=1):
-                        buf = io.BytesIO()
-                        torch.save(content, buf)
-                        write_atomic(run_dir / f"model_refit{k}.pt", buf.getvalue())
+                        write_torch_atomic(run_dir / f"model_refit{k}.pt", content)
                 runner.save(str(run_dir / "model_distilled.pt"), {"warm_start": {**stats, **ens_stats}})
             if cfg.warm_start_temperature != 1.0:
                 runner.alg.actor.sharpen(cfg.warm_start_temperature)
