@@ -70,6 +70,31 @@ def test_ctrl_c_in_the_driver_keeps_what_finished():
     assert got == {0: 0, 1: 1}
 
 
+def one_thread(x: int) -> int:
+    """A task that sets its own torch thread count, as the demonstration days do."""
+    import torch
+
+    torch.set_num_threads(1)
+    return x
+
+
+def test_a_task_run_in_this_process_leaves_its_torch_thread_count():
+    """A task that sets torch's thread count must not change the driver's (a run's PPO updates
+    after its warm start's days would add up differently with one worker than with two)."""
+    import torch
+
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(3)
+        problem, got = _collect(LocalBackend(1), one_thread, [1, 2])
+        assert problem is None and got == {0: 1, 1: 2}
+        assert torch.get_num_threads() == 3
+        _collect(LocalBackend(1), fails_on_three, [3])  # also after a task that raised
+        assert torch.get_num_threads() == 3
+    finally:
+        torch.set_num_threads(before)
+
+
 def test_choice_of_backend_and_its_errors():
     assert isinstance(make_backend("local", 3), LocalBackend) and make_backend("local", 3).slots == 3
     assert make_backend("local", 1).describe() == "local: this process"

@@ -3,12 +3,13 @@ machine. Needs nothing beyond the project's own dependencies."""
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import signal
 import sys
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from agents.execution.base import INTERRUPTED, Backend, OnResult, first_line, task_failure
 
@@ -38,6 +39,23 @@ def _end_with_parent() -> None:
         os._exit(1)
 
 
+@contextlib.contextmanager
+def _own_torch_threads() -> Iterator[None]:
+    """Run a task in this process without letting it change the process's torch thread count.
+
+    Tasks set their own count, as a worker process would (the demonstration days run on one
+    thread); in this process that count would outlive the task and change how the caller's
+    later work, say a run's PPO updates, adds up its floats, so a run would give other weights
+    with one worker than with two. torch is looked up, never imported, here."""
+    torch = sys.modules.get("torch")
+    threads = torch.get_num_threads() if torch is not None else None
+    try:
+        yield
+    finally:
+        if threads is not None and torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
+
+
 class LocalBackend(Backend):
     """``workers`` processes (default: the CPU cores); 1 runs every task in this process."""
 
@@ -65,7 +83,8 @@ class LocalBackend(Backend):
                   on_result: OnResult) -> str | None:
         for i, task in enumerate(tasks):
             try:
-                result = fn(task)
+                with _own_torch_threads():
+                    result = fn(task)
             except KeyboardInterrupt:
                 return INTERRUPTED
             except Exception as exc:
