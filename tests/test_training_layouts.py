@@ -171,8 +171,10 @@ def test_critic_ablation_configs_differ_from_scratch_only_in_what_they_ablate():
 
 
 def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm_start():
-    """Every YAML file under configs/train/ (subfolders too) is a valid train config, and
-    ppo_stage/sharpened.yaml keeps the default's warm start (its PPO stage alone differs)."""
+    """Every YAML file under configs/train/ (subfolders too) is a valid train config; the
+    default distils an ensemble of fits before PPO, single_fit.yaml is the default without
+    that stage, and ppo_stage/sharpened.yaml keeps single_fit's warm start (its PPO stage alone
+    differs), as it was measured."""
     from agents.gcn.train.pipeline import TRAIN_CONFIG_DIR, load_train_config
 
     files = sorted(TRAIN_CONFIG_DIR.rglob("*.yaml"))
@@ -180,7 +182,10 @@ def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm
     for path in files:
         load_train_config(path)
     default = to_dict(load_train_config("default"))
+    single = to_dict(load_train_config("single_fit"))
     stage = to_dict(load_train_config("ppo_stage/sharpened"))
-    for key in ("pretrain", "model", "scenarios", "seed", "lost_vehicle_penalty", "mode"):
-        assert stage[key] == default[key], key
+    assert default["ensemble"]["fits"] == 4 and single["ensemble"]["fits"] == 0
+    assert {k: v for k, v in single.items() if v != default[k]} == {"ensemble": single["ensemble"]}
+    for key in ("pretrain", "model", "scenarios", "seed", "lost_vehicle_penalty", "mode", "ensemble"):
+        assert stage[key] == single[key], key
     assert stage["warm_start_temperature"] == 0.3 and default["warm_start_temperature"] == 1.0
