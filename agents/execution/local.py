@@ -44,9 +44,9 @@ def _own_torch_threads() -> Iterator[None]:
     """Run a task in this process without letting it change the process's torch thread count.
 
     Tasks set their own count, as a worker process would (the demonstration days run on one
-    thread); in this process that count would outlive the task and change how the caller's
-    later work, say a run's PPO updates, adds up its floats, so a run would give other weights
-    with one worker than with two. torch is looked up, never imported, here."""
+    thread); in this process that count would outlive the task and run the caller's later work,
+    say a run's PPO updates, on other threads than its config asks for. torch is looked up,
+    never imported, here."""
     torch = sys.modules.get("torch")
     threads = torch.get_num_threads() if torch is not None else None
     try:
