@@ -12,6 +12,8 @@ CONFIG ?= paper
 .DEFAULT_GOAL := help
 AGENTS   ?= random fcfs heuristic
 EPISODES ?= 50
+# Whether EPISODES was given (make evaluate SUITE=... EPISODES=N: the first N of the suite's days).
+EPISODES_GIVEN = $(filter command line environment environment override,$(origin EPISODES))
 CONFIGS  ?= paper paper_uncertain
 OUT      ?= runs/eval
 AGENT    ?= heuristic
@@ -59,15 +61,15 @@ fuzz: $(STAMP)  ## the property-based tests on many more examples (HYPOTHESIS_PR
 # CONFIG names an env config elsewhere; for `train` it names a train config when given.
 TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 
-train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>)
-	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(RUN_ON)
+train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>, WORKERS=1 for one process)
+	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
 
 curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), ITERATIONS to override their budget, 95 % intervals over seeds, baselines as lines (runs/curves/)
 	$(CLI) curves --configs $(CURVES) --seeds $(SEEDS) $(if $(ITERATIONS),--iterations $(ITERATIONS)) $(RUN_ON)
 
-evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report
+evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report (EPISODES=N: its first N days)
 ifdef SUITE
-	$(CLI) evaluate --suite $(SUITE) --out $(OUT)/$(notdir $(basename $(SUITE))) --report $(OUT)/$(notdir $(basename $(SUITE)))/report.md $(RUN_ON)
+	$(CLI) evaluate --suite $(SUITE) $(if $(EPISODES_GIVEN),--episodes $(EPISODES)) --out $(OUT)/$(notdir $(basename $(SUITE))) --report $(OUT)/$(notdir $(basename $(SUITE)))/report.md $(RUN_ON)
 else
 	$(CLI) evaluate --agents $(AGENTS) --configs $(CONFIGS) --episodes $(EPISODES) --out $(OUT) $(RUN_ON)
 endif

@@ -1,8 +1,16 @@
 """What every backend keeps: run ``fn(task)`` for each task, hand each result to the driver as
-it completes, stop handing out work when the driver says so or on Ctrl-C; and its errors."""
+it completes, stop handing out work when the driver says so or on Ctrl-C; and its errors.
+
+Every backend runs a task through :func:`call_task`, which gives it the same start wherever it
+runs: in the driver's own process, in a worker that has run other tasks before, or on another
+node. That is what makes a result depend on the task alone, and a training run the same on one
+worker as on many (docs/training.md, "Reproducibility").
+"""
 
 from __future__ import annotations
 
+import random
+import sys
 import traceback
 from abc import ABC, abstractmethod
 from pathlib import Path
@@ -15,6 +23,44 @@ RAY_EXTRA_HINT = "pip install -e '.[ray]' (in a checkout) or pip install 'marl_v
 
 #: ``on_result(index of the task, its result) -> go on?``, called in the driver.
 OnResult = Callable[[int, Any], bool]
+#: The seed of torch's, NumPy's and Python's global generators at the start of every task. In
+#: a new process they are seeded from the operating system; a task that drew from one would then
+#: differ from run to run. The project's tasks draw from generators of their own, seeded by the
+#: task; a task that did draw from a global one still gives the same result on every backend.
+TASK_SEED = 0
+
+
+def call_task(fn: Callable[[Any], Any], task: Any) -> Any:
+    """``fn(task)`` from the same start in every process, leaving the caller's process as it
+    found it.
+
+    Before the task, torch's (where torch is loaded), NumPy's and Python's global generators
+    are seeded with :data:`TASK_SEED`; after it, the caller's generator states and torch thread
+    count are restored (a task sets its own thread count, as the demonstration days do). So a
+    task's result does not depend on which process runs it or what ran there before, and a
+    task run in the driver's own process (one worker) leaves the driver's later draws, such as
+    PPO's, as they are when the task runs in a worker. torch and NumPy are looked up, never
+    imported, here.
+    """
+    torch, np = sys.modules.get("torch"), sys.modules.get("numpy")
+    saved_torch = (torch.get_rng_state(), torch.get_num_threads()) if torch is not None else None
+    saved_numpy = np.random.get_state() if np is not None else None
+    saved_random = random.getstate()
+    if torch is not None:
+        torch.manual_seed(TASK_SEED)
+    if np is not None:
+        np.random.seed(TASK_SEED)
+    random.seed(TASK_SEED)
+    try:
+        return fn(task)
+    finally:
+        random.setstate(saved_random)
+        if saved_numpy is not None:
+            np.random.set_state(saved_numpy)
+        if saved_torch is not None:
+            torch.set_rng_state(saved_torch[0])
+            if torch.get_num_threads() != saved_torch[1]:
+                torch.set_num_threads(saved_torch[1])
 
 
 class BackendError(RuntimeError):

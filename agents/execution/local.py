@@ -3,15 +3,16 @@ machine. Needs nothing beyond the project's own dependencies."""
 
 from __future__ import annotations
 
-import contextlib
 import multiprocessing
 import os
 import signal
 import sys
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Sequence
 
-from agents.execution.base import INTERRUPTED, Backend, OnResult, first_line, task_failure
+from agents.execution.base import (
+    INTERRUPTED, Backend, OnResult, first_line, call_task, task_failure,
+)
 
 
 def _worker_init() -> None:
@@ -37,23 +38,6 @@ def _end_with_parent() -> None:
         return
     if os.getppid() == 1:  # the driver died before the request was made
         os._exit(1)
-
-
-@contextlib.contextmanager
-def _own_torch_threads() -> Iterator[None]:
-    """Run a task in this process without letting it change the process's torch thread count.
-
-    Tasks set their own count, as a worker process would (the demonstration days run on one
-    thread); in this process that count would outlive the task and run the caller's later work,
-    say a run's PPO updates, on other threads than its config asks for. torch is looked up,
-    never imported, here."""
-    torch = sys.modules.get("torch")
-    threads = torch.get_num_threads() if torch is not None else None
-    try:
-        yield
-    finally:
-        if threads is not None and torch.get_num_threads() != threads:
-            torch.set_num_threads(threads)
 
 
 class LocalBackend(Backend):
@@ -83,8 +67,7 @@ class LocalBackend(Backend):
                   on_result: OnResult) -> str | None:
         for i, task in enumerate(tasks):
             try:
-                with _own_torch_threads():
-                    result = fn(task)
+                result = call_task(fn, task)
             except KeyboardInterrupt:
                 return INTERRUPTED
             except Exception as exc:
@@ -106,7 +89,7 @@ class LocalBackend(Backend):
         seen: set[int] = set()
         problem: str | None = None
         try:
-            futures = [pool.submit(fn, task) for task in tasks]
+            futures = [pool.submit(call_task, fn, task) for task in tasks]
             index = {id(f): i for i, f in enumerate(futures)}
             for fut in as_completed(futures):
                 i = index[id(fut)]

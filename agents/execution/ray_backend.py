@@ -19,7 +19,7 @@ import sys
 from typing import Any, Callable, Sequence
 
 from agents.execution.base import (
-    INTERRUPTED, RAY_EXTRA_HINT, Backend, BackendError, OnResult, first_line,
+    INTERRUPTED, RAY_EXTRA_HINT, Backend, BackendError, OnResult, first_line, call_task,
 )
 
 #: Object store of a Ray instance this backend starts itself (results are fetched as they
@@ -44,7 +44,7 @@ def _call(fn: Callable[[Any], Any], task: Any) -> tuple[str, Any]:
     """Runs in a Ray worker: ``(the node it ran on, fn(task))``."""
     import ray
 
-    return ray.get_runtime_context().get_node_id(), fn(task)
+    return ray.get_runtime_context().get_node_id(), call_task(fn, task)
 
 
 class RayBackend(Backend):

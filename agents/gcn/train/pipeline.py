@@ -33,6 +33,7 @@ import torch
 import yaml
 
 from agents.common.files import write_atomic, write_torch_atomic
+from agents.common.provenance import png_metadata, provenance
 from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
 from agents.gcn.train.ensemble import distil_ensemble
 from agents.gcn.train.imitation import (
@@ -462,7 +463,7 @@ def plot_curves(rows: list[dict[str, float]], out: Path, title: str,
     fig.suptitle(title)
     fig.tight_layout()
     tmp = out.with_name(out.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
+    fig.savefig(tmp, dpi=110, metadata=png_metadata(provenance()))
     plt.close(fig)
     os.replace(tmp, out)
 
@@ -642,10 +643,10 @@ def load_checkpoint_into(runner, path: Path) -> None:
         raise ValueError(f"checkpoint {path} cannot be loaded into this run: {first}") from None
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str = "python -m agents.train") -> int:
     import argparse
 
-    parser = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__,
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", default="default", help="name in configs/train/ or a YAML path")
     parser.add_argument("--resume", metavar="RUN_DIR", help="continue the run in this folder")
@@ -653,6 +654,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iterations", type=int, help="override the number of PPO iterations")
     parser.add_argument("--device", help="override the device (cpu, cuda, cuda:0)")
     parser.add_argument("--no-eval", action="store_true", help="skip the evaluation at the end")
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="processes for the warm start's and the ensemble's days (1: this "
+                             "process; with --backend ray, the CPUs of a Ray instance of its "
+                             "own); default: the config's pretrain.workers. The checkpoints do "
+                             "not depend on it")
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
     backend = None
@@ -673,7 +679,9 @@ def main(argv: list[str] | None = None) -> int:
             overrides["device"] = args.device
         if overrides:
             cfg = build_dataclass(TrainConfig, {**to_dict(cfg), **overrides})
-        backend = backend_from_args(args, cfg.pretrain.workers)
+        if args.workers is not None and args.workers < 1:
+            raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+        backend = backend_from_args(args, args.workers or cfg.pretrain.workers)
         backend_args = ["--backend", args.backend] + (
             ["--ray-address", args.ray_address] if args.ray_address else [])
         final = train(cfg, run_dir, resume=bool(args.resume), evaluate=not args.no_eval,
