@@ -29,11 +29,13 @@ import argparse
 import json
 import os
 import platform
+import shlex
 import sys
 from pathlib import Path
 from typing import Any
 
 
+from agents.common.provenance import provenance
 from agents.common.files import write_atomic
 from agents.bench.workloads import (
     bench_api_floor, bench_env, bench_env_memory, bench_inference, bench_profile,
@@ -43,8 +45,8 @@ from agents.bench.workloads import (
 from agents.bench.report import report
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m agents.bench", description=__doc__,
+def main(argv: list[str] | None = None, prog: str = "python -m agents.bench") -> int:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=20_000, help="env steps per timed run")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per measurement")
@@ -62,8 +64,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report", default=None, help="write the Markdown report here")
     args = parser.parse_args(argv)
     results: dict[str, Any] = {
-        "command": "python -m agents.bench " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "command": shlex.join([*prog.split(), *(argv if argv is not None else sys.argv[1:])]),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores", "python": platform.python_version(),
+        "provenance": provenance(),
     }
     print("benchmarking (each part in turn) ...", file=sys.stderr)
     results["traffic"] = bench_traffic([c for c in args.configs if c in ("paper", "large")] or args.configs[:1],
@@ -71,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     results["fleet_sizes"] = bench_fleet_sizes(args.traffic_days, max(1, args.repeats // 2))
     figure = (Path(args.report).with_name("performance_fleet.png") if args.report
               else Path(args.out) / "performance_fleet.png")
-    fleet_size_figure(results["fleet_sizes"], figure)
+    fleet_size_figure(results["fleet_sizes"], figure, results["provenance"])
     results["fleet_size_figure"] = figure.name
     results["planner"] = bench_planner("paper", args.planner_decisions)
     results["env"] = bench_env(args.steps, args.repeats, args.configs)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from agents.common.provenance import describe
+
 
 
 
@@ -190,6 +192,9 @@ def report(results: dict[str, Any]) -> str:
         f"(Python {results['python']}); regenerate with `make bench`.",
         "",
     ]
+    if results.get("provenance"):
+        lines += [f"Made with {describe(results['provenance'])} (`provenance` in "
+                  "`bench.json`).", ""]
     lines += _traffic_lines(results.get("traffic") or [])
     lines += _target_lines(results)
     lines += _profile_lines(results)

@@ -380,9 +380,13 @@ def bench_fleet_sizes(days: int, repeats: int, seed: int = 2200) -> list[dict[st
     return rows
 
 
-def fleet_size_figure(rows: list[dict[str, Any]], path: Path) -> None:
+def fleet_size_figure(rows: list[dict[str, Any]], path: Path,
+                      provenance: dict[str, Any] | None = None) -> None:
     """µs per step against fleet size, with the line proportional to the fleet through the
-    smallest fleet's point for comparison; a PNG at ``path``."""
+    smallest fleet's point for comparison; a PNG at ``path`` (``provenance`` in its
+    metadata, agents/common/provenance.py)."""
+    from agents.common.provenance import png_metadata
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -401,7 +405,7 @@ def fleet_size_figure(rows: list[dict[str, Any]], path: Path) -> None:
     ax.set_title("Cost of a step against fleet size")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    fig.savefig(path, metadata=png_metadata(provenance) if provenance else None)
     plt.close(fig)
 
 

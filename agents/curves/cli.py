@@ -30,14 +30,18 @@ import time
 from pathlib import Path
 from typing import Sequence
 
+from agents.common.provenance import provenance
 from agents.curves.outputs import CURVE_METRICS, CurvesResult, final_rows, summary_rows, write_outputs
 from agents.curves.runs import SeedTask, baseline_seeds, train_seed
 from agents.execution import INTERRUPTED, BackendError, add_backend_arguments, backend_from_args
 from marl_vertiport.config import ConfigError, build_dataclass, to_dict
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m agents.curves", description=__doc__,
+PROG = "python -m agents.curves"
+
+
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--configs", nargs="+", default=["scratch"], metavar="CONFIG",
                         help="train configs: names in configs/train/ or YAML paths (default: scratch)")
@@ -112,10 +116,9 @@ def run_baselines(result: CurvesResult, agents: Sequence[str], episodes: int, ba
                                          "ci_low": low, "ci_high": high, "days": len(per_day)})
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    command = "python -m agents.curves " + " ".join(shlex.quote(a) for a in (
-        argv if argv is not None else sys.argv[1:]))
+def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
+    args = build_parser(prog).parse_args(argv)
+    command = shlex.join([*prog.split(), *(argv if argv is not None else sys.argv[1:])])
     backend = None
     try:
         if args.seeds < 1:
@@ -137,7 +140,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
-    result = CurvesResult(labels=labels, configs=configs, seeds=seeds, backend=backend.describe())
+    result = CurvesResult(labels=labels, configs=configs, seeds=seeds, backend=backend.describe(),
+                          provenance=provenance(args.baselines if args.baseline_episodes else ()))
     tasks = []
     for label in labels:
         for seed in seeds:

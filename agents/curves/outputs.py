@@ -52,6 +52,8 @@ class CurvesResult:
     backend: str = ""
     seconds: float = 0.0
     error: str | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+    """The code and machine the study ran with (agents/common/provenance.py)."""
 
     @property
     def complete(self) -> bool:
@@ -181,7 +183,7 @@ def curves_figure(result: CurvesResult, summary: list[dict[str, Any]]) -> bytes:
     fig.suptitle(f"Learning curves over training seeds {seeds}: training days (stochastic "
                  f"policy), 95 % bootstrap intervals over seeds")
     fig.tight_layout(rect=(0, 0.1 + 0.03 * (len(labels) // 4), 1, 0.95))
-    data = png_bytes(fig)
+    data = png_bytes(fig, result.provenance)
     plt.close(fig)
     return data
 
@@ -194,7 +196,7 @@ def baselines_csv(result: CurvesResult) -> str:
 def curves_json(result: CurvesResult, command: str) -> str:
     return json.dumps({
         "command": command, "complete": result.complete, "error": result.error,
-        "backend": result.backend, "seconds": result.seconds, "seeds": result.seeds,
+        "provenance": result.provenance, "backend": result.backend, "seconds": result.seconds, "seeds": result.seeds,
         "baseline_days": (f"validation seeds {result.baseline_seeds[0]}:{result.baseline_seeds[1]}"
                           if result.baseline_seeds else None),
         "configs": {label: result.configs[label] for label in result.labels},

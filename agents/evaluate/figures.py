@@ -27,10 +27,14 @@ def pyplot() -> Any:
     return plt
 
 
-def png_bytes(fig: Any) -> bytes:
-    """The PNG of ``fig`` at the resolution of every chart of the project."""
+def png_bytes(fig: Any, provenance: dict[str, Any] | None = None) -> bytes:
+    """The PNG of ``fig`` at the resolution of every chart of the project; ``provenance``
+    (:func:`agents.common.provenance.provenance`) goes into the file's text metadata."""
+    from agents.common.provenance import png_metadata
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=130, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=130, bbox_inches="tight",
+                metadata=png_metadata(provenance) if provenance else None)
     return buf.getvalue()
 
 
@@ -78,7 +82,7 @@ def case_study_figure(evaluation: Evaluation) -> bytes:
     fig.suptitle(f"Case study: mean per day over {n} evaluation days, error bars = "
                  f"{round(100 * s.confidence)} % bootstrap CI", fontsize=13, y=1.05)
     fig.tight_layout()
-    data = png_bytes(fig)
+    data = png_bytes(fig, evaluation.provenance)
     plt.close(fig)
     return data
 
@@ -128,7 +132,7 @@ def action_distribution_figure(evaluation: Evaluation, episodes: int = ACTION_EP
                  f"{'s' if used != 1 else ''} (seeds {seeds[0]}–{seeds[-1]})",
                  fontsize=13, y=1.04)
     fig.tight_layout()
-    data = png_bytes(fig)
+    data = png_bytes(fig, evaluation.provenance)
     plt.close(fig)
     return data
 

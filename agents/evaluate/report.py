@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 
+from agents.common.provenance import describe
 from agents.common.files import write_atomic
 from agents.evaluate.metrics import DIRECTION, METRIC_LABELS, agent_label, case_label
 from agents.evaluate.settings import ACTION_EPISODES, Evaluation
@@ -118,7 +119,8 @@ def report_markdown(evaluation: Evaluation, command: str, report_path: Path,
     pct = round(100 * s.confidence)
     steps = evaluation.stat(s.agents[0], s.configs[0], "steps")
     parts = ["# Evaluation results", "",
-             f"Produced by `{command}`.", "",
+             f"Produced by `{command}`; made with {describe(evaluation.provenance)} "
+             "(`provenance` in `results.json`).", "",
              f"Every agent played the same {n} evaluation day{'s' if n != 1 else ''} of each case "
              f"(seeds {seeds[0]} … {seeds[-1]}, `{s.seeds_rule}`; `agents/common/seeds.py` keeps "
              "them apart from every training seed), "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+from agents.common.provenance import provenance
 from agents.common.seeds import EVAL_SEEDS
 from agents.controllers.registry import AgentSpecError, make_controller
 from agents.evaluate.settings import EvalSettings, Evaluation, InputError
@@ -65,6 +66,7 @@ def evaluate(settings: EvalSettings, workers: int = 1, progress: bool = True,
     processes (1: this process); the results do not depend on which."""
     if action_names is None:
         action_names = validate(settings)
+    made_with = provenance(settings.agents)  # the code and checkpoints as they are now
     start = time.perf_counter()
     try:
         records, error = run_episodes(settings, backend or LocalBackend(workers), progress)
@@ -73,6 +75,6 @@ def evaluate(settings: EvalSettings, workers: int = 1, progress: bool = True,
     metrics = scalar_metrics(records)
     return Evaluation(settings, records, action_names, metrics,
                       summarize(records, settings, metrics), error,
-                      seconds=time.perf_counter() - start)
+                      seconds=time.perf_counter() - start, provenance=made_with)
 
 

@@ -135,6 +135,9 @@ class Evaluation:
     summary: list[dict[str, Any]] = field(default_factory=list)
     error: str | None = None
     seconds: float = 0.0
+    provenance: dict[str, Any] = field(default_factory=dict)
+    """The code, checkpoints and machine it was made with
+    (:func:`agents.common.provenance.provenance`)."""
 
     @property
     def complete(self) -> bool:

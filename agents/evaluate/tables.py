@@ -89,6 +89,7 @@ def results_json(evaluation: Evaluation, command: str) -> str:
         "complete": evaluation.complete,
         "error": evaluation.error,
         "command": command,
+        "provenance": evaluation.provenance,
         "settings": evaluation.settings.to_json(),
         "action_names": evaluation.action_names,
         "metrics": evaluation.metrics,

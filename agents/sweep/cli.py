@@ -28,6 +28,7 @@ from typing import Any, Sequence
 
 import yaml
 
+from agents.common.provenance import provenance
 from agents.controllers.registry import agent_help
 from agents.evaluate.cli import check_outputs
 from agents.evaluate.episodes import close_envs, run_tasks
@@ -39,8 +40,11 @@ from agents.sweep.outputs import SweepResult, summary_rows, write_outputs
 from agents.sweep.spec import SweepSpec, load_sweep, point_label
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m agents.sweep", description=__doc__,
+PROG = "python -m agents.sweep"
+
+
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("sweep", metavar="SWEEP",
                         help="a sweep file: a name in configs/sweeps/ or a YAML path")
@@ -121,6 +125,7 @@ def validate(spec: SweepSpec) -> None:
 
 def run_sweep(spec: SweepSpec, backend: Backend, progress: bool = True) -> SweepResult:
     """Run every episode of ``spec`` on ``backend``; the records come back in task order."""
+    made_with = provenance(spec.agents)  # the code and checkpoints as they are now
     start = time.perf_counter()
     given = dict.fromkeys(spec.keys)
 
@@ -132,7 +137,8 @@ def run_sweep(spec: SweepSpec, backend: Backend, progress: bool = True) -> Sweep
         records, error = run_tasks(spec.tasks(), backend, progress, label)
     finally:
         close_envs()
-    return SweepResult(spec, records, error, time.perf_counter() - start, backend.describe())
+    return SweepResult(spec, records, error, time.perf_counter() - start, backend.describe(),
+                       provenance=made_with)
 
 
 def format_summary(result: SweepResult) -> str:
@@ -158,11 +164,12 @@ def format_summary(result: SweepResult) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line entry point; returns the exit code."""
+def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
+    """Command line entry point (``prog``: the command as the user typed it); returns the
+    exit code."""
     args_list = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser().parse_args(args_list)
-    command = shlex.join(["python", "-m", "agents.sweep", *args_list])
+    args = build_parser(prog).parse_args(args_list)
+    command = shlex.join([*prog.split(), *args_list])
     try:
         spec = load_sweep(args.sweep, changes_from_args(args))
         out = args.out or Path("runs/sweeps") / spec.name

@@ -31,6 +31,8 @@ class SweepResult:
     seconds: float = 0.0
     backend: str = ""
     metrics: list[str] = field(default_factory=list)
+    provenance: dict[str, Any] = field(default_factory=dict)
+    """The code, checkpoints and machine it was made with (agents/common/provenance.py)."""
 
     def __post_init__(self) -> None:
         if not self.metrics:
@@ -142,14 +144,14 @@ def sweep_figure(result: SweepResult, rows: Sequence[dict[str, Any]]) -> bytes:
                  f"point, shaded: {round(100 * CONFIDENCE)} % bootstrap CI", fontsize=12,
                  y=1.06 + 0.03 * math.ceil(len(labels) / 4))
     fig.tight_layout()
-    data = png_bytes(fig)
+    data = png_bytes(fig, result.provenance)
     plt.close(fig)
     return data
 
 
 def sweep_json(result: SweepResult, rows: Sequence[dict[str, Any]], command: str) -> str:
     doc = {"complete": result.complete, "error": result.error, "command": command,
-           "backend": result.backend, "seconds": result.seconds,
+           "provenance": result.provenance, "backend": result.backend, "seconds": result.seconds,
            "episodes_done": len(result.records), "episodes_planned": len(result.spec.tasks()),
            "spec": result.spec.to_json(), "metrics": result.metrics, "summary": list(rows)}
     return json.dumps(doc, indent=1, allow_nan=True) + "\n"
