@@ -39,6 +39,8 @@ COMMANDS = {
     "info": ("marl_vertiport.cli", "spaces, features and action names of a config"),
     "check-config": ("marl_vertiport.cli", "validate an env config and print it resolved"),
 }
+#: The console command.
+PROG = "marl-vertiport"
 #: Commands that belong to ``marl_vertiport.cli``, whose ``main`` takes the command name too.
 _ENV_COMMANDS = ("demo", "info", "check-config")
 
@@ -46,7 +48,7 @@ _ENV_COMMANDS = ("demo", "info", "check-config")
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser (for ``--help`` and errors); a command's own options are parsed by
     its module."""
-    parser = argparse.ArgumentParser(prog="marl-vertiport", description=__doc__,
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (_, help_text) in COMMANDS.items():
@@ -61,9 +63,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         build_parser().parse_args(argv[:1])  # prints the help, or the error, and exits
     command, rest = argv[0], argv[1:]
     module_name, _ = COMMANDS[command]
-    if command in _ENV_COMMANDS:
-        rest = [command, *rest]
-    code = importlib.import_module(module_name).main(rest)
+    # --help and the result files name the command as the user typed it.
+    prog = f"{PROG} {command}"
+    if command in _ENV_COMMANDS:  # one parser with the three as subcommands
+        rest, prog = [command, *rest], PROG
+    code = importlib.import_module(module_name).main(rest, prog=prog)
     return int(code or 0)
 
 

@@ -74,8 +74,8 @@ def _check_config(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="marl_vertiport", description=__doc__,
+def main(argv: list[str] | None = None, prog: str = "python -m marl_vertiport.cli") -> int:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="random legal actions for a few episodes")

@@ -31,6 +31,28 @@ class ConfigError(ValueError):
     """A config file or override that cannot describe a valid vertiport."""
 
 
+class UnknownKeyError(ConfigError):
+    """An override (``--set``, ``EnvConfig.replace``, a keyword) names no config key or
+    section; the message lists the known ones. ``keyword`` is the override as it was given
+    (``uncertainty__wind_gust_prob`` or ``uncertainty.wind_gust_prob``) where known."""
+
+    keyword: str | None = None
+
+
+class UnexpectedKeywordError(UnknownKeyError, TypeError):
+    """An env constructor's keyword that is no config key: a :class:`ConfigError`, as the
+    env's documentation promises, and a ``TypeError``, Python's and Gymnasium's convention
+    for an unexpected keyword argument (wrappers such as TorchRL's ``GymEnv`` rely on it, and
+    on its message starting as Python's own does)."""
+
+    @classmethod
+    def of(cls, owner: str, error: UnknownKeyError) -> "UnexpectedKeywordError":
+        """The constructor error of ``owner`` (a class name) for an override ``error``."""
+        new = cls(f"{owner}() got an unexpected keyword argument {error.keyword!r}: {error}")
+        new.keyword = error.keyword
+        return new
+
+
 # --------------------------------------------------------------------------------------
 # Schema
 # --------------------------------------------------------------------------------------
@@ -198,10 +220,18 @@ class EnvConfig:
 
     def replace(self, **overrides: Any) -> EnvConfig:
         """Return a copy with dotted-key overrides, e.g. ``{"uncertainty.wind_gust_prob": 0.1}``
-        or section dicts ``uncertainty={"wind_gust_prob": 0.1}``."""
+        or section dicts ``uncertainty={"wind_gust_prob": 0.1}``.
+
+        Raises:
+            UnknownKeyError: a key or section that does not exist (the known ones listed).
+            ConfigError: a value the schema refuses, the field named."""
         data = to_dict(self)
         for key, value in overrides.items():
-            _set_dotted(data, key.replace("__", "."), value)
+            try:
+                _set_dotted(data, key.replace("__", ".") if isinstance(key, str) else key, value)
+            except UnknownKeyError as exc:
+                exc.keyword = key
+                raise
         return from_dict(data)
 
 
@@ -456,23 +486,33 @@ def to_dict(cfg: Any) -> dict[str, Any]:
     return conv(cfg)
 
 
+def _known(node: dict[str, Any], sections: bool = False) -> str:
+    """The keys of a config level, for an error message (only its sections if asked)."""
+    keys = sorted(k for k, v in node.items() if not sections or isinstance(v, dict))
+    return ", ".join(keys)
+
+
 def _set_dotted(data: dict[str, Any], key: str, value: Any, prefix: str = "") -> None:
     """Set ``key`` (dotted, below ``prefix``) of ``data`` to ``value``; a dict value sets the
-    section's keys one by one. Errors name the full dotted key."""
+    section's keys one by one. Errors name the full dotted key and list the known keys
+    (:class:`UnknownKeyError`)."""
     if not isinstance(key, str):
-        raise ConfigError(f"{prefix}{key!r}: unknown key (keys are names)")
+        raise UnknownKeyError(f"{prefix}{key!r}: unknown key (keys are names; known: "
+                              f"{_known(data)})")
     parts = key.split(".")
     node = data
     for i, part in enumerate(parts[:-1]):
         if part not in node or not isinstance(node[part], dict):
-            raise ConfigError(f"{prefix}{'.'.join(parts[: i + 1])}: unknown config section")
+            where = f" in {prefix[:-1]}" if prefix else ""
+            raise UnknownKeyError(f"{prefix}{'.'.join(parts[: i + 1])}: unknown config section"
+                                  f"{where} (sections: {_known(node, sections=True)})")
         node = node[part]
     last = parts[-1]
     if isinstance(value, dict) and isinstance(node.get(last), dict):
         for sub_key, sub_value in value.items():
             _set_dotted(node[last], sub_key, sub_value, f"{prefix}{key}.")
     elif last not in node:
-        raise ConfigError(f"{prefix}{key}: unknown key")
+        raise UnknownKeyError(f"{prefix}{key}: unknown key (known: {_known(node)})")
     else:
         node[last] = to_dict(value) if dataclasses.is_dataclass(value) else value
 

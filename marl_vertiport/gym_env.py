@@ -50,7 +50,8 @@ class VertiportEnv(gym.Env):
 
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        world = make_world(config, render_mode, self.metadata["render_modes"], **overrides)
+        world = make_world(config, render_mode, self.metadata["render_modes"],
+                           type(self).__name__, **overrides)
         self.config, self.sim, self._builder = world.config, world.sim, world.builder
         self.render_mode = render_mode
         self._started = False

@@ -141,7 +141,8 @@ class raw_env(AECEnv):
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
         super().__init__()
-        world = make_world(config, render_mode, self.metadata["render_modes"], **overrides)
+        world = make_world(config, render_mode, self.metadata["render_modes"],
+                           type(self).__name__, **overrides)
         self.config, self.sim, self._builder = world.config, world.sim, world.builder
         self.render_mode = render_mode
         self.possible_agents = [f"evtol_{i}" for i in range(self.sim.n)]

@@ -6,7 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from marl_vertiport.config import EnvConfig, load_config
+from marl_vertiport.config import (
+    EnvConfig, UnexpectedKeywordError, UnknownKeyError, load_config,
+)
 from marl_vertiport.render import draw_scenery
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import display_available
@@ -23,17 +25,25 @@ class World:
 
 
 def make_world(config: str | EnvConfig | dict | None, render_mode: str | None,
-               render_modes: list[str], **overrides: Any) -> World:
-    """Validate ``render_mode`` against ``render_modes``, load the config with ``overrides``,
-    and build the simulator (pybullet's window for ``"human"`` where a display exists).
+               render_modes: list[str], owner: str, /, **overrides: Any) -> World:
+    """Validate ``render_mode`` against ``render_modes``, load the config with ``overrides``
+    (the keywords of the env ``owner``, a class name for errors), and build the simulator
+    (pybullet's window for ``"human"`` where a display exists).
 
     Raises:
         ValueError: an unknown render mode.
-        ConfigError: a bad config or override.
+        UnexpectedKeywordError: a keyword that is no config key (a ``ConfigError`` and a
+            ``TypeError``).
+        ConfigError: a bad config or override value.
     """
     if render_mode is not None and render_mode not in render_modes:
         raise ValueError(f"render_mode {render_mode!r} is not one of {render_modes} or None")
-    cfg = load_config(config, **overrides)
+    try:
+        cfg = load_config(config, **overrides)
+    except UnknownKeyError as exc:
+        if exc.keyword is None:  # a key of the config file or dict itself
+            raise
+        raise UnexpectedKeywordError.of(owner, exc) from None
     sim = VertiportSim(cfg, gui=render_mode == "human" and display_available())
     builder = ObservationBuilder(sim)
     if sim.physics.gui:

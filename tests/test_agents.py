@@ -289,3 +289,32 @@ def test_pyg_example_acts_legally_on_two_vertiports_through_to_graph_batch():
         assert logits.shape == legal.shape and torch.isinf(logits[~legal]).all()
         assert torch.isfinite(logits[legal]).all()
         assert to_graph_batch(obs).num_graphs == len(obs)
+
+
+def test_every_illegal_action_message_lists_the_legal_actions_one_way():
+    """The env's three refusals (wrong type, out of range, masked out) and the evaluation's
+    check of a controller list the legal actions alike: ``index (name)``, comma-separated."""
+    env = vertiport_v0.env()
+    env.reset(seed=0)
+    obs = env.observe(env.agent_selection)
+    sim = env.unwrapped.sim
+    names = sim.actions.names(sim.layout)
+    legal = ", ".join(f"{i} ({names[i]})" for i in np.flatnonzero(obs["action_mask"]))
+    illegal = int(np.flatnonzero(obs["action_mask"] == 0)[0])
+    messages = []
+    for action in ("stay", 99, illegal):
+        with pytest.raises(ValueError) as exc:
+            env.step(action)
+        messages.append(str(exc.value))
+
+    class Stubborn:
+        name = "stubborn"
+
+        def act(self, observation):
+            return illegal
+
+    with pytest.raises(ValueError) as exc:
+        run_aec_episode(vertiport_v0.env(), Stubborn(), 0)
+    messages.append(str(exc.value))
+    assert all(m.endswith(legal) for m in messages), messages
+    assert "[" not in legal and "'" not in legal

@@ -176,3 +176,63 @@ def test_a_step_too_short_to_move_is_refused():
     """Found by make fuzz: 1e-277 m/s for 3e-279 s per step divided by zero in the energy model."""
     with pytest.raises(ConfigError, match=r"^flight\.flight_seconds_per_step: .* at least 0\.01 m"):
         load_config("paper", **{"flight.cruise_speed_mps": 1e-277, "flight.flight_seconds_per_step": 3e-279})
+
+
+def _make_aec(**kw):
+    from marl_vertiport import vertiport_v0
+
+    return vertiport_v0.env(config="paper", **kw)
+
+
+def _make_gym(**kw):
+    import gymnasium
+
+    return gymnasium.make("marl_vertiport/Vertiport-v0", config="paper", **kw)
+
+
+@pytest.mark.parametrize("make", [_make_aec, _make_gym], ids=["aec", "gymnasium"])
+@pytest.mark.parametrize("keyword, shown, known", [
+    ("fleet_sise", "fleet_sise: unknown key", "known: atc, battery, fleet_size, flight"),
+    ("uncertainty.wind_gust_prb", "uncertainty.wind_gust_prb: unknown key",
+     "known: action_misread_prob, charger_failure_prob"),
+    ("uncertainty__wind_gust_prb", "uncertainty.wind_gust_prb: unknown key",
+     "known: action_misread_prob, charger_failure_prob"),
+    ("uncertanty__wind_gust_prob", "uncertanty: unknown config section",
+     "sections: atc, battery, flight, layout"),
+])
+def test_unknown_env_keywords_are_config_errors_and_type_errors(make, keyword, shown, known):
+    """Python's and Gymnasium's convention (a ``TypeError`` saying "unexpected keyword
+    argument", which TorchRL's GymEnv relies on) and the env's own (``ConfigError``)."""
+    with pytest.raises(ConfigError) as exc:
+        make(**{keyword: 1})
+    assert isinstance(exc.value, TypeError)
+    message = str(exc.value)
+    assert f"got an unexpected keyword argument {keyword!r}" in message
+    assert shown in message and known in message
+
+
+def test_config_typos_in_a_file_or_an_override_keep_their_field_errors(tmp_path):
+    path = tmp_path / "typo.yaml"
+    path.write_text("base: paper\nfleet_sise: 4\n")
+    with pytest.raises(ConfigError, match=r"fleet_sise: unknown key \(known: atc, battery") as exc:
+        load_config(path)
+    assert not isinstance(exc.value, TypeError)
+    with pytest.raises(ConfigError, match=r"^fleet_sise: unknown key \(known: atc") as exc:
+        load_config("paper", fleet_sise=4)
+    assert "unexpected keyword" not in str(exc.value)
+    # A bad value of a known key stays a plain field error, not a TypeError.
+    from marl_vertiport import vertiport_v0
+
+    with pytest.raises(ConfigError, match=r"uncertainty.wind_gust_prob: is a probability") as exc:
+        vertiport_v0.env(config="paper", **{"uncertainty.wind_gust_prob": 1.5})
+    assert not isinstance(exc.value, TypeError)
+
+
+def test_set_typos_in_the_evaluation_name_the_field(tmp_path, capsys):
+    from agents.evaluate.cli import main
+
+    assert main(["--agents", "fcfs", "--episodes", "1", "--set", "fleet_sise=4",
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "fleet_sise: unknown key (known: atc, battery, fleet_size" in err
+    assert "unexpected keyword" not in err

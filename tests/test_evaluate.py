@@ -326,6 +326,32 @@ def test_seed_range_and_suite(tmp_path):
     assert ev.main(["--suite", str(bad), "--out", str(tmp_path / "d")]) == 2
 
 
+def test_a_suite_with_fewer_episodes_keeps_its_own_first_days(tmp_path):
+    """--episodes N with a suite plays the first N of the suite's seeds, never the days of
+    another evaluation; more days than the suite has is refused."""
+    argv = ["--suite", "transfer", "--agents", "fcfs", "--configs", "paper", "--workers", "1",
+            *TINY]
+    assert ev.main([*argv, "--episodes", "2", "--out", str(tmp_path / "a")]) == 0
+    assert [r["seed"] for r in _rows(tmp_path / "a" / "episodes.csv")] == ["1000100", "1000101"]
+    settings = json.loads((tmp_path / "a" / "results.json").read_text())["settings"]
+    assert settings["seeds"] == [1000100, 1000101]
+    assert ev.main([*argv, "--episodes", "31", "--out", str(tmp_path / "b")]) == 2
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("given, expected", [
+    (["EPISODES=2"], "--suite transfer --episodes 2 "),
+    ([], "--suite transfer --out"),
+])
+def test_make_evaluate_passes_episodes_on_to_a_suite(given, expected):
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run(["make", "-n", "-o", ".venv/.installed", "evaluate", "SUITE=transfer",
+                          *given], cwd=root, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    line = next(l for l in out.stdout.splitlines() if "evaluate --suite" in l)
+    assert expected in " ".join(line.split()) + " "
+
+
 @pytest.mark.parametrize("path", sorted(ev.SUITE_DIR.glob("*.yaml")), ids=lambda p: p.stem)
 def test_shipped_suites_name_real_configs_agents_and_test_seeds(path):
     from agents.controllers.registry import make_controller

@@ -8,6 +8,9 @@ skipped with the reason where its extra is absent. The flattening wrapper needs 
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -217,3 +220,42 @@ def test_rllib_ppo_three_iterations(rllib_env):
             assert math.isfinite(learner[key]), key
     assert results[-1]["num_env_steps_sampled_lifetime"] == 3 * 2 * STEPS
     assert _changed(before, after)
+
+
+# -- a missing extra, and TorchRL's own Gymnasium wrapper -----------------------------------
+
+
+@pytest.mark.parametrize("module, blocked, extra", [
+    ("agents.interop.torchrl_env", "torchrl", "torchrl"),
+    ("agents.interop.rllib_env", "ray", "rllib"),
+])
+def test_an_adapter_without_its_extra_fails_at_import_with_the_install_command(module, blocked, extra):
+    """Without the library, importing the adapter fails at once with one line naming the
+    extra to install (the library is hidden from a fresh interpreter)."""
+    code = (f"import sys; sys.modules[{blocked!r}] = None\n"
+            f"try:\n    import {module}\nexcept ImportError as exc:\n    print(exc)\n"
+            f"else:\n    print('imported')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert out.returncode == 0, out.stderr
+    line = out.stdout.strip()
+    assert line != "imported" and "\n" not in line
+    assert f"install the {extra} extra, pip install -e '.[{extra}]'" in line
+
+
+def test_torchrl_gymenv_builds_the_single_agent_env_by_its_id():
+    """TorchRL's ``GymEnv`` passes ``frameskip`` first and drops it on a TypeError that says
+    so: the env's unknown-keyword error keeps that convention."""
+    pytest.importorskip("torchrl", reason=TORCHRL_MISSING)
+    from torchrl.envs import GymEnv
+
+    import marl_vertiport  # noqa: F401 (registers the id)
+
+    env = GymEnv("marl_vertiport/Vertiport-v0", categorical_action_encoding=True, **SHORT)
+    td = env.reset(seed=0)
+    legal = torch.nonzero(td["action_mask"].bool()).flatten()
+    td["action"] = legal[0]
+    out = env.step(td)
+    assert out["next", "reward"].shape == (1,)
+    assert set(out["next", "observation"].keys()) == {"port_nodes", "evtol_nodes", "self"}
+    env.close()

@@ -14,7 +14,7 @@ import numpy as np
 
 from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE,
-    PORT_FEATURES, TAXIING, ActionLayout,
+    PORT_FEATURES, TAXIING, ActionLayout, format_actions,
 )
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, NORMAL_PORT
 
@@ -189,9 +189,18 @@ class Observation:
         return np.flatnonzero(self.mask)
 
 
-def _check_legal(policy: Any, agent: str, action: Any, mask: np.ndarray) -> int:
+def action_names(env: Any) -> list[str]:
+    """The names of ``env``'s actions (either API), for error messages."""
+    sim = env.unwrapped.sim
+    return sim.actions.names(sim.layout)
+
+
+def _check_legal(policy: Any, agent: str, action: Any, mask: np.ndarray,
+                 names: list[str]) -> int:
+    """``action`` as an int if ``mask`` allows it, else ``ValueError`` naming the controller,
+    the agent and the legal actions (in the env's own format, :func:`format_actions`)."""
     name = getattr(policy, "name", type(policy).__name__)
-    legal = np.flatnonzero(mask).tolist()
+    legal = format_actions(np.flatnonzero(mask), names)
     try:
         a = int(action)
     except (TypeError, ValueError):
@@ -220,13 +229,14 @@ def run_aec_episode(env: Any, policy: Any, seed: int, on_step=None) -> dict[str,
     """
     env.reset(seed=seed)
     _prepare(policy, env, seed)
+    names = action_names(env)
     info: dict[str, Any] = {}
     for agent in env.agent_iter():
         obs, _, termination, truncation, info = env.last()
         if termination or truncation:
             env.step(None)
             continue
-        action = _check_legal(policy, agent, policy.act(obs), obs["action_mask"])
+        action = _check_legal(policy, agent, policy.act(obs), obs["action_mask"], names)
         env.step(action)
         if on_step is not None:
             on_step(agent, action, env)
@@ -237,10 +247,11 @@ def run_gym_episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
     """One episode of the single-agent env driven by the same kind of ``policy``."""
     obs, _ = env.reset(seed=seed)
     _prepare(policy, env, seed)
+    names = action_names(env)
     truncated = terminated = False
     info: dict[str, Any] = {}
     while not (truncated or terminated):
         action = _check_legal(policy, info.get("agent", "the acting eVTOL"), policy.act(obs),
-                              obs["action_mask"])
+                              obs["action_mask"], names)
         obs, _, terminated, truncated, info = env.step(action)
     return info["episode"]

@@ -1,6 +1,8 @@
 """Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``,
 ``rollout`` (the look-ahead planner, which reads the simulator), ``gcn``
-(the shipped trained policy), ``package.module:Class`` (a class, or a ready object), the path
+(the shipped trained policy), ``package.module:Class`` or ``path/to/file.py:Class`` (a class,
+or a ready object; modules and files resolve from the working directory, as under
+``python -m``), the path
 of a training checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
 :class:`agents.gcn.policy.GCNEnsemble`).
 
@@ -12,7 +14,6 @@ Quote it in a shell (``'heuristic[holding=false]'``): brackets are glob characte
 
 from __future__ import annotations
 
-import importlib
 import re
 from pathlib import Path
 from typing import Any
@@ -37,8 +38,9 @@ def agent_help() -> str:
     """What an agent spec may be, for the ``--help`` of every command that takes one."""
     names = ", ".join([*BUILTIN, "gcn"])
     return (f"a built-in name ({names}; gcn is the shipped checkpoint), the path of a training "
-            "checkpoint (.pt), checkpoints joined by '+' (their ensemble) or an import path "
-            "'package.module:Class'; constructor arguments "
+            "checkpoint (.pt), checkpoints joined by '+' (their ensemble), an import path "
+            "'package.module:Class' or a file 'path/to/file.py:Class' (both from the working "
+            "directory); constructor arguments "
             "in brackets, e.g. 'heuristic[holding=false]'")
 
 
@@ -74,22 +76,15 @@ def split_spec(spec: str) -> tuple[str, dict[str, Any]]:
 
 
 def _import(path: str, spec: str) -> Any:
-    module_name, _, attr_path = path.partition(":")
-    if not module_name or not attr_path:
-        raise AgentSpecError(f"agent {spec!r}: an import path looks like 'package.module:Class'")
+    """The object ``path`` names: ``package.module:Attr`` or ``path/to/file.py:Attr`` (``Attr``
+    may be dotted). Modules and files resolve from the working directory, as under
+    ``python -m`` (:mod:`agents.common.imports`)."""
+    from agents.common.imports import ImportTargetError, import_target
+
     try:
-        module = importlib.import_module(module_name)
-    except Exception as exc:  # ImportError, or an error raised while importing it
-        raise AgentSpecError(f"agent {spec!r}: cannot import module {module_name!r}: "
-                             f"{type(exc).__name__}: {exc}") from exc
-    obj: Any = module
-    for part in attr_path.split("."):
-        try:
-            obj = getattr(obj, part)
-        except AttributeError:
-            raise AgentSpecError(f"agent {spec!r}: module {module_name!r} has no attribute "
-                                 f"{attr_path!r}") from None
-    return obj
+        return import_target(path)
+    except ImportTargetError as exc:
+        raise AgentSpecError(f"agent {spec!r}: {exc}") from exc.__cause__
 
 
 def _checkpoint_path(spec: str) -> Path:

@@ -35,7 +35,7 @@ from agents.common.seeds import parse_seed_range
 from agents.controllers.registry import agent_help
 from agents.evaluate.settings import (
     BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, DEFAULT_AGENTS, DEFAULT_CONFIGS, EvalSettings,
-    Evaluation, INTERRUPTED, InputError, load_suite, parse_overrides,
+    Evaluation, INTERRUPTED, InputError, SuiteConfig, load_suite, parse_overrides,
 )
 from agents.evaluate.episodes import close_envs
 from agents.evaluate.run import evaluate, validate
@@ -46,9 +46,12 @@ from agents.execution import Backend, BackendError, add_backend_arguments, backe
 # ============================================================================ CLI
 
 
-def build_parser() -> argparse.ArgumentParser:
+PROG = "python -m agents.evaluate"
+
+
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.evaluate", description=__doc__,
+        prog=prog, description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--agents", nargs="+", default=None, metavar="AGENT",
                         help=f"controllers to evaluate, each {agent_help()} "
@@ -61,7 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "(default: 50, the paper's protocol)")
     parser.add_argument("--suite", default=None, metavar="NAME",
                         help="an evaluation suite in configs/suites/ (or a YAML path): its "
-                             "agents, cases and seeds, unless given here too")
+                             "agents, cases and seeds, unless given here too; --episodes N "
+                             "takes the first N of the suite's own seeds")
     parser.add_argument("--seeds", default=None, metavar="START:STOP",
                         help="evaluate on seeds START .. STOP-1 instead (validation seeds "
                              "800000-999999 for development, test seeds >= 1000000 for "
@@ -124,6 +128,25 @@ def _unique(items: Iterable[str]) -> tuple[str, ...]:
     return tuple(dict.fromkeys(items))
 
 
+def suite_days(suite: SuiteConfig, episodes: int | None) -> tuple[str | None, int | None]:
+    """``(--seeds, --episodes)`` of a suite run: its own seed range, cut to its first
+    ``episodes`` seeds when a count is given, or, for a suite without a range, the count
+    (``EVAL_SEEDS[:n]``). A count beyond the suite's range is an error: the suite's days are
+    kept apart from other evaluations', so none are added from elsewhere."""
+    if not suite.seeds:
+        return None, suite.episodes if episodes is None else episodes
+    try:
+        days = parse_seed_range(suite.seeds)
+    except ValueError as exc:
+        raise InputError(f"suite {suite.name}: seeds: {exc}") from None
+    if episodes is None:
+        return suite.seeds, None
+    if not 1 <= episodes <= len(days):
+        raise InputError(f"--episodes {episodes}: suite {suite.name} has {len(days)} days "
+                         f"(seeds {suite.seeds}); give 1 to {len(days)}")
+    return f"{days.start}:{days.start + episodes}", None
+
+
 def run_on(backend: Backend, settings: EvalSettings, names: dict[str, list[str]],
            progress: bool) -> Evaluation:
     """Run the evaluation on ``backend``, saying where on stderr first."""
@@ -132,21 +155,19 @@ def run_on(backend: Backend, settings: EvalSettings, names: dict[str, list[str]]
     return evaluate(settings, progress=progress, action_names=names, backend=backend)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line entry point; returns the exit code (0 ok, 1 failed mid-run, 2 bad input)."""
+def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
+    """Command line entry point (``prog``: the command as the user typed it, for ``--help``
+    and the results' record); returns the exit code (0 ok, 1 failed mid-run, 2 bad input)."""
     args_list = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser().parse_args(args_list)
-    command = shlex.join(["python", "-m", "agents.evaluate", *args_list])
+    args = build_parser(prog).parse_args(args_list)
+    command = shlex.join([*prog.split(), *args_list])
     try:
         agents, configs = args.agents or list(DEFAULT_AGENTS), args.configs or list(DEFAULT_CONFIGS)
         if args.suite is not None:
             suite = load_suite(args.suite)
             agents, configs = args.agents or list(suite.agents), args.configs or list(suite.configs)
-            if args.seeds is None and args.episodes is None:
-                if suite.seeds:
-                    args.seeds = suite.seeds
-                else:
-                    args.episodes = suite.episodes
+            if args.seeds is None:
+                args.seeds, args.episodes = suite_days(suite, args.episodes)
         episodes, first_seed = 50 if args.episodes is None else args.episodes, None
         if args.seeds is not None:
             try:

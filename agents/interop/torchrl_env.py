@@ -43,6 +43,8 @@ __all__ = ["ACTING", "ACTION", "ACTION_MASK", "GROUP", "LOG_PROB", "OBSERVATION"
            "make_actor", "make_critic", "make_env", "ppo"]
 
 EXTRA = "torchrl"
+require("torchrl", EXTRA)  # fail at import, with the install command, without the extra
+
 GROUP = "evtol"
 #: The graph observation's keys sit under this one (PettingZoo's "observation" key, nested in
 #: the wrapper's own "observation" once "action_mask" has moved up).
@@ -60,7 +62,6 @@ def make_env(config: Any = "paper", *, seed: int | None = None, return_state: bo
              **overrides: Any):
     """The AEC env (``vertiport_v0.env``) behind TorchRL's ``PettingZooWrapper``, all agents in
     the group ``"evtol"``; ``overrides`` as in ``vertiport_v0.env``."""
-    require("torchrl", EXTRA)
     from torchrl.envs import PettingZooWrapper
 
     aec = vertiport_v0.env(config=config, **overrides)
@@ -108,7 +109,6 @@ class _ActorNet(nn.Module):
 def make_actor(env, hidden: int = 64):
     """One shared MLP over each agent's flattened graph observation, sampling from a
     ``MaskedCategorical`` of its logits and ``("evtol", "action_mask")``."""
-    require("torchrl", EXTRA)
     from tensordict.nn import TensorDictModule
     from torchrl.modules import MaskedCategorical, ProbabilisticActor
 
@@ -144,7 +144,6 @@ def make_critic(env, hidden: int = 64, centralised: bool | None = None):
     """A value per agent at ``("evtol", "state_value")``: centralised (from ``"state"``, the
     env's ``state()``) when the env was made with ``return_state=True``, otherwise from the
     agent's own observation."""
-    require("torchrl", EXTRA)
     from tensordict.nn import TensorDictModule
 
     has_state = "state" in env.observation_spec.keys()
@@ -170,7 +169,6 @@ def ppo(env, actor, critic, *, iterations: int = 3, frames_per_batch: int = 64,
     the acting agents' rows only. Yields one dict per iteration: the steps collected, the
     acting agents' steps and illegal actions among them, the episodes ended, the acting
     agents' summed reward and the last minibatch's losses."""
-    require("torchrl", EXTRA)
     from torchrl.collectors import Collector
     from torchrl.objectives import ClipPPOLoss, ValueEstimators
 

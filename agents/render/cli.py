@@ -78,9 +78,12 @@ def _positive_float(text: str) -> float:
     return v
 
 
-def build_parser() -> argparse.ArgumentParser:
+PROG = "python -m agents.render"
+
+
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
-        prog="python -m agents.render",
+        prog=prog,
         description="Render part of one episode of a controller as an animated GIF (or MP4): "
                     "the 3-D vertiport with labelled eVTOLs, the time of day, the last ATC "
                     "instruction, and per eVTOL its battery, status, schedule and events.",
@@ -144,8 +147,8 @@ def _check_output(out: Path) -> None:
         raise RenderError(f"cannot write output {str(out)!r}: the file is read-only")
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = PROG) -> int:
+    args = build_parser(prog).parse_args(argv)
     try:
         return _run(args)
     except RenderError as exc:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.controllers.base import _check_legal, _prepare
+from agents.controllers.base import _check_legal, _prepare, action_names
 from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from agents.common.seeds import VALIDATION_SEED_BASE, parse_seed_range
 from marl_vertiport import ConfigError, vertiport_v0
@@ -52,6 +52,7 @@ def charger_day(agent: str, config: str, fleet_size: int, seed: int,
     env.reset(seed=seed)
     _prepare(policy, env, seed)
     sim = env.unwrapped.sim
+    names = action_names(env)
     chargers = sim._charging_nodes.tolist()
     day = ChargerDay(seed=seed, fleet_size=fleet_size)
     minutes = sim.minutes_per_step
@@ -78,7 +79,7 @@ def charger_day(agent: str, config: str, fleet_size: int, seed: int,
             if v >= 0 and v != last_occupant[c]:
                 day.sessions += 1
             last_occupant[c] = v
-        env.step(_check_legal(policy, agent_name, policy.act(obs), obs["action_mask"]))
+        env.step(_check_legal(policy, agent_name, policy.act(obs), obs["action_mask"], names))
         day.delivered_pct += float(sum(max(sim.battery[v] - before[v], 0.0) for v in on_it))
     env.close()
     episode = info["episode"]
@@ -105,8 +106,8 @@ def table(rows: list[dict[str, float]]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m agents.studies.capacity", description=__doc__,
+def main(argv: list[str] | None = None, prog: str = "python -m agents.studies.capacity") -> int:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--agent", default="heuristic",
                         help=f"controller: {agent_help()} (default: heuristic)")

@@ -63,8 +63,8 @@ def soak_day(env, agent: str, seed: int, events: Counter) -> list[str]:
     return problems
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m agents.studies.soak", description=__doc__,
+def main(argv: list[str] | None = None, prog: str = "python -m agents.studies.soak") -> int:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--days", type=int, default=40, help="days per layout (default: 40)")
     parser.add_argument("--configs", nargs="+", default=["paper", "small", "mid", "twin", "wide", "large"],

@@ -42,6 +42,7 @@ from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, LEADING_ACTIONS, NO_OPERATION,
     ON_CHARGER, ON_PORT, OUT_OF_SERVICE, PENDING_LANDING, PENDING_TAKEOFF, SELF_FEATURES,
     STATE_EXTRA_FEATURES, STATE_PORT_FEATURES, STATUS_NAMES, TAXIING, ActionLayout, _IS_SELF,
+    format_actions,
 )
 from marl_vertiport.sim.physics import FlightPhysics
 from marl_vertiport.sim.reward import RewardModel
@@ -364,7 +365,8 @@ class VertiportSim:
         if (type(action) is int or isinstance(action, np.integer)) and 0 <= action < len(mask) \
                 and mask[action]:
             return int(action)
-        legal = np.flatnonzero(mask).tolist()
+        names = self.actions.names(self.layout)
+        legal = format_actions(np.flatnonzero(mask), names)
         if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
             if isinstance(action, np.ndarray) and action.shape == () and np.issubdtype(action.dtype, np.integer):
                 action = int(action)
@@ -378,11 +380,9 @@ class VertiportSim:
                 f"evtol_{v}: action {a} is out of range [0, {self.actions.n - 1}]; legal actions "
                 f"now: {legal}")
         if not mask[a]:
-            names = self.actions.names(self.layout)
             raise IllegalActionError(
                 f"evtol_{v}: action {a} ({names[a]}) is masked out in status "
-                f"{STATUS_NAMES[self.status[v]]}; legal actions now: "
-                f"{[f'{i} ({names[i]})' for i in legal]}")
+                f"{STATUS_NAMES[self.status[v]]}; legal actions now: {legal}")
         return a
 
     def step(self, action: Any) -> tuple[float, dict[str, Any]]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from marl_vertiport.sim.layout import Layout
@@ -92,3 +92,11 @@ class ActionLayout:
         for k in range(layout.n_hover):
             out.append(f"hover_spot_{k}")
         return out + ["continue", "avoid_collision"]
+
+
+def format_actions(actions: Any, names: list[str]) -> str:
+    """Actions as error messages list them: ``"0 (stay), 1 (takeoff), 4 (charging_port_0)"``
+    (``names``: :meth:`ActionLayout.names`); ``"none"`` for an empty list."""
+    shown = [f"{int(a)} ({names[int(a)]})" if 0 <= int(a) < len(names) else str(int(a))
+             for a in actions]
+    return ", ".join(shown) if shown else "none"
