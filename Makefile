@@ -26,10 +26,10 @@ ITERATIONS ?=
 BACKEND  ?= local
 RUN_ON    = --backend $(BACKEND)
 
-.PHONY: help venv test test-fast fuzz soak train curves evaluate sweep results render bench env-demo clean
+.PHONY: help venv test test-fast fuzz soak train check-train check-train-margin curves evaluate sweep results render bench env-demo clean
 
 help:  ## list the targets
-	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-10s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
+	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-18s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
 
 $(PY):
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; marl_vertiport needs CPython 3.11 (pybullet 3.2.7 has a wheel for 3.11 only). Set PYTHON=/path/to/python3.11"; exit 1; }
@@ -63,6 +63,13 @@ TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>, WORKERS=1 for one process)
 	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
+
+check-train: $(STAMP)  ## train as make train does (or CHECKPOINT=path), then pair it with the shipped checkpoint on 200 validation days: M, every safety metric and a verdict (about 10 minutes)
+	$(CLI) check-train $(if $(CHECKPOINT),--checkpoint $(CHECKPOINT)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
+
+check-train-margin: $(STAMP)  ## measure M of check-train: train seeds 0, 1 and 2 of the default config, play them on the check's days (about 35 minutes)
+	for seed in 0 1 2; do $(CLI) train --config default --seed $$seed --no-eval --run-dir runs/check-train-margin/seed$$seed $(RUN_ON) || exit 1; done
+	$(CLI) check-train --margin runs/check-train-margin/seed0 runs/check-train-margin/seed1 runs/check-train-margin/seed2 --out runs/check-train-margin/margin $(RUN_ON)
 
 curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), ITERATIONS to override their budget, 95 % intervals over seeds, baselines as lines (runs/curves/)
 	$(CLI) curves --configs $(CURVES) --seeds $(SEEDS) $(if $(ITERATIONS),--iterations $(ITERATIONS)) $(RUN_ON)

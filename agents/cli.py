@@ -5,6 +5,7 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     evaluate      evaluate controllers on cases or a suite (tables, CIs, figures, report)
     sweep         a grid of agents x cases x config overrides x days: tidy CSV and figure
     train         train the GCN ATC from a train config (warm start, PPO, evaluation)
+    check-train   train as make train does, then compare with the shipped checkpoint: verdict
     curves        learning curves over training seeds, with intervals and baselines
     render        an animated GIF or MP4 of one episode of a controller
     bench         the speed and memory benchmark (docs/performance.md)
@@ -33,6 +34,7 @@ COMMANDS = {
     "curves": ("agents.curves.cli", "learning curves over training seeds"),
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),
+    "check-train": ("agents.checks.train", "a fresh training run against the shipped checkpoint"),
     "capacity": ("agents.studies.capacity", "the charger study"),
     "soak": ("agents.studies.soak", "many days with high uncertainty: invariants and memory"),
     "demo": ("marl_vertiport.cli", "random legal actions for a few episodes"),

@@ -21,7 +21,7 @@ LAYERS = (
          "agents.gcn")),                                              # controllers
     (3, ("agents.evaluate", "agents.sweep")),                         # evaluation
     (4, ("agents", "agents.gcn.train", "agents.train", "agents.render", "agents.bench",
-         "agents.studies", "agents.curves", "agents.interop")),                        # training and tools
+         "agents.studies", "agents.curves", "agents.interop", "agents.checks")),        # training and tools
 )
 LAYER_NAMES = ("simulator core", "env APIs", "controllers", "evaluation", "training and tools")
 

@@ -651,6 +651,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.train") ->
     parser.add_argument("--config", default="default", help="name in configs/train/ or a YAML path")
     parser.add_argument("--resume", metavar="RUN_DIR", help="continue the run in this folder")
     parser.add_argument("--run-dir", help="folder of a new run (default runs/train/<config>_<time>)")
+    parser.add_argument("--seed", type=int, help="override the config's seed")
     parser.add_argument("--iterations", type=int, help="override the number of PPO iterations")
     parser.add_argument("--device", help="override the device (cpu, cuda, cuda:0)")
     parser.add_argument("--no-eval", action="store_true", help="skip the evaluation at the end")
@@ -671,8 +672,13 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.train") ->
         else:
             cfg = load_train_config(args.config)
             stamp = time.strftime("%Y%m%d-%H%M%S")
-            run_dir = Path(args.run_dir or f"runs/train/{Path(args.config).stem}_{stamp}")
+            seed = "" if args.seed is None else f"_seed{args.seed}"
+            run_dir = Path(args.run_dir or f"runs/train/{Path(args.config).stem}{seed}_{stamp}")
         overrides = {}
+        if args.seed is not None:
+            if args.resume:
+                raise ConfigError("--seed: a resumed run keeps the seed it was started with")
+            overrides["seed"] = args.seed
         if args.iterations is not None:
             overrides["iterations"] = args.iterations
         if args.device is not None:
