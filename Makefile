@@ -26,7 +26,7 @@ ITERATIONS ?=
 BACKEND  ?= local
 RUN_ON    = --backend $(BACKEND)
 
-.PHONY: help venv test test-fast fuzz soak train check-train check-train-margin curves evaluate sweep results render bench env-demo clean
+.PHONY: help venv test test-fast check-results fuzz soak train check-train check-train-margin curves evaluate sweep results render bench env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-18s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -46,11 +46,14 @@ $(STAMP): $(PY) pyproject.toml
 
 venv: $(STAMP)  ## create .venv and install the project with pinned dependencies
 
-test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward, invariants)
-	$(PY) -m pytest -q
+test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward, invariants) but the replay of the shipped results
+	$(PY) -m pytest -q -m "not replay"
 
 test-fast: $(STAMP)  ## the test suite without the full-episode tests
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow and not replay"
+
+check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (about 2 minutes)
+	$(PY) -m pytest -q -m replay tests/test_shipped_results.py
 
 soak: $(STAMP)  ## many days with every uncertainty high on six layouts: invariants after every step, memory (about 2 minutes)
 	$(CLI) soak --days 40
@@ -84,10 +87,11 @@ endif
 sweep: $(STAMP)  ## run the sweep SWEEP of configs/sweeps/ (default wind) into runs/sweeps/SWEEP: tidy CSV, figure with CIs (BACKEND=ray to use a cluster)
 	$(CLI) sweep $(SWEEP) --out runs/sweeps/$(notdir $(basename $(SWEEP))) $(RUN_ON)
 
-results: $(STAMP)  ## regenerate docs/results.md (50 days per uncertainty level), docs/results/transfer.md and docs/results/scaling.md (the suites)
-	$(CLI) evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md
-	$(CLI) evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md
-	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md
+results: $(STAMP)  ## regenerate every shipped result of the shipped policy: docs/results.md (50 days per uncertainty level), docs/results/transfer.md and docs/results/scaling.md (the suites), docs/results/sweeps/wind (the wind sweep)
+	$(CLI) evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md $(RUN_ON)
+	$(CLI) evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md $(RUN_ON)
+	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
+	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
 	$(CLI) render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif

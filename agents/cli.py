@@ -6,6 +6,7 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     sweep         a grid of agents x cases x config overrides x days: tidy CSV and figure
     train         train the GCN ATC from a train config (warm start, PPO, evaluation)
     check-train   train as make train does, then compare with the shipped checkpoint: verdict
+    check-results the shipped results name the shipped checkpoint and replay exactly
     curves        learning curves over training seeds, with intervals and baselines
     render        an animated GIF or MP4 of one episode of a controller
     bench         the speed and memory benchmark (docs/performance.md)
@@ -35,6 +36,7 @@ COMMANDS = {
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),
     "check-train": ("agents.checks.train", "a fresh training run against the shipped checkpoint"),
+    "check-results": ("agents.checks.results", "shipped results: their record and their first days replayed"),
     "capacity": ("agents.studies.capacity", "the charger study"),
     "soak": ("agents.studies.soak", "many days with high uncertainty: invariants and memory"),
     "demo": ("marl_vertiport.cli", "random legal actions for a few episodes"),

@@ -91,4 +91,4 @@ def test_the_shipped_check_config_names_real_configs_and_validation_days():
     assert set(cfg.configs) == set(load_train_config(cfg.train_config).scenarios)
     for name in cfg.configs:
         load_config(name)
-    assert cfg.reward_margin >= 0 and cfg.lost_margin == 0.1
+    assert cfg.reward_margin > 0 and cfg.lost_margin == 0.1
