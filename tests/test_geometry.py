@@ -97,3 +97,80 @@ def test_scalar_and_array_swept_distances_agree():
     for k, (a, b) in enumerate(zip(pi, pj)):
         assert swept_min_distance_pair(tuple(start[a]), tuple(end[a]), tuple(start[b]),
                                        tuple(end[b])) == pytest.approx(array[k], abs=1e-12)
+
+
+def test_dot_and_length_add_the_products_left_to_right_in_plain_arithmetic():
+    from marl_vertiport.sim.geometry import dot, length
+
+    rng = np.random.default_rng(3)
+    for n in (2, 3):
+        for _ in range(2000):
+            u, v = rng.normal(size=n) * 37.0, rng.normal(size=n) * 0.3
+            expected = u[0] * v[0] + u[1] * v[1] + (u[2] * v[2] if n == 3 else 0.0)
+            assert dot(u, v) == expected
+            assert length(u) == np.sqrt(u[0] * u[0] + u[1] * u[1] + (u[2] * u[2] if n == 3 else 0.0))
+
+
+BLAS_CALLS = {"dot", "inner", "vdot", "matmul", "tensordot", "einsum_path"}
+
+
+def test_the_simulator_and_the_rule_controllers_hand_nothing_to_blas():
+    """numpy's BLAS picks its kernel by the CPU (a fused multiply-add on AVX-512, none on
+    AVX2), so a product of vectors there gives other last bits on other machines: no ``@``,
+    no ``np.dot``-like call and no ``np.linalg.norm`` of a whole vector (without ``axis``) in
+    the code whose numbers the shipped results are."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    files = [*sorted((root / "marl_vertiport").rglob("*.py")),
+             *sorted((root / "agents" / "controllers").rglob("*.py"))]
+    found = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            where = f"{path.relative_to(root)}:{getattr(node, 'lineno', '?')}"
+            if isinstance(node, (ast.BinOp, ast.AugAssign)) and isinstance(node.op, ast.MatMult):
+                found.append(f"{where}: @")
+            elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+                name = node.func.attr
+                if name in BLAS_CALLS:
+                    found.append(f"{where}: {name}()")
+                elif name == "norm" and not any(k.arg == "axis" for k in node.keywords):
+                    found.append(f"{where}: norm() of a whole vector")
+    assert found == []
+
+
+def _cpu_flags() -> set[str]:
+    from pathlib import Path
+
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+def test_a_day_is_the_same_on_the_avx2_and_the_avx512_blas_kernels():
+    """A day whose reward differed in its last bits between the two kernels (machines)
+    before the simulator stopped using BLAS, played in fresh processes with each kernel."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if not {"avx512f", "avx512dq", "avx512bw", "avx512vl", "fma", "avx2"} <= _cpu_flags():
+        pytest.skip("needs a CPU that runs both OpenBLAS kernels (AVX-512)")
+    code = ("from agents.evaluate.episodes import run_task\n"
+            "from agents.evaluate.settings import EpisodeTask\n"
+            "m = run_task(EpisodeTask('heuristic', 'paper_uncertain_10', 0, 1000100, ())).metrics\n"
+            "print(repr(m['total_reward']), repr(m['mean_battery_pct']), m['steps'])")
+    out = {}
+    for kernel in ("Haswell", "SkylakeX"):
+        env = {**os.environ, "OPENBLAS_CORETYPE": kernel}
+        run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             timeout=300, env=env, cwd=Path(__file__).resolve().parents[1])
+        assert run.returncode == 0, run.stderr[-2000:]
+        out[kernel] = run.stdout.strip()
+    assert out["Haswell"] == out["SkylakeX"] and out["Haswell"].endswith(" 1440")

@@ -170,8 +170,11 @@ def tasks_of(result: ResultSet, rows: list[dict[str, str]]) -> list:
 
 def as_written(header: list[str], result: ResultSet, row: dict[str, str],
                metrics: dict[str, Any]) -> dict[str, str]:
-    """A replayed episode's row as the CSV writer writes it (every value through ``csv``)."""
-    values = [row[c] if c in (*KEY_COLUMNS, *result.grid) else metrics.get(c, "<missing>")
+    """A replayed episode's row as the evaluation writes it (floats to ``CSV_DIGITS``
+    significant digits, every value through ``csv``)."""
+    from agents.evaluate.tables import csv_metric
+
+    values = [row[c] if c in (*KEY_COLUMNS, *result.grid) else csv_metric(metrics.get(c, "<missing>"))
               for c in header]
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerow(values)

@@ -39,6 +39,7 @@ from agents.controllers.base import (
     ARRIVING, CHARGING_PORT, HOVER_SPOT, HOVERING, NORMAL_PORT, ON_CHARGER, ON_PORT, TAXIING,
     Controller, Observation,
 )
+from marl_vertiport.sim.geometry import dot
 
 
 #: Bound on the remembered holding spots (see :meth:`DispatcherController.holding_spot`).
@@ -49,7 +50,10 @@ def _segment_point_distance_m(a: np.ndarray, b: np.ndarray, points: np.ndarray) 
     """Horizontal distance (m) from each of ``points`` ``(K, 2)`` to the segment ``a``-``b``
     (each ``(2,)``), shape ``(K,)``."""
     ab = b - a
-    t = np.clip((points - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+    rel = points - a
+    # Products added in plain arithmetic, not by BLAS (marl_vertiport/sim/geometry.py).
+    along = rel[:, 0] * ab[0] + rel[:, 1] * ab[1]
+    t = np.clip(along / max(dot(ab, ab), 1e-12), 0.0, 1.0)
     return np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
 
 

@@ -12,6 +12,7 @@ from agents.common.files import write_atomic
 from agents.evaluate.metrics import DIRECTION, METRIC_LABELS, agent_label, case_label
 from agents.evaluate.settings import ACTION_EPISODES, Evaluation
 from agents.evaluate.tables import (
+    CSV_DIGITS,
     decimals, episodes_csv, format_interval, results_json, summary_csv,
 )
 from agents.evaluate.figures import action_distribution_figure, case_study_figure
@@ -127,8 +128,9 @@ def report_markdown(evaluation: Evaluation, command: str, report_path: Path,
              "through the PettingZoo AEC API, with a fresh controller per day. "
              f"Cells are `mean [{pct} % CI]`, the CI being a percentile bootstrap of the mean "
              f"({s.bootstrap} resamples, generator seed {s.bootstrap_seed}). Per-episode numbers "
-             "are in `episodes.csv`, the summary in `summary.csv` and everything in "
-             "`results.json`, next to the figures."]
+             f"are in `episodes.csv` (floats to {CSV_DIGITS} significant digits), the summary in "
+             "`summary.csv` and everything in `results.json` (full precision), next to the "
+             "figures."]
     if s.overrides:
         parts += ["", "Config overrides: " + ", ".join(f"`{k}={v!r}`" for k, v in s.overrides)
                   + "."]

@@ -17,7 +17,7 @@ from agents.evaluate.figures import png_bytes, pyplot
 from agents.evaluate.metrics import METRIC_LABELS, agent_label, axis_label
 from agents.evaluate.settings import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, CONFIDENCE, EpisodeRecord
 from agents.evaluate.stats import describe, scalar_metrics
-from agents.evaluate.tables import csv_text
+from agents.evaluate.tables import csv_metric, csv_text
 from agents.sweep.spec import SweepSpec
 
 
@@ -51,11 +51,11 @@ def point_of(spec: SweepSpec, record: EpisodeRecord) -> tuple[Any, ...]:
 
 def sweep_csv(result: SweepResult) -> str:
     """Tidy: one row per episode; columns agent, config, each swept key, episode, seed and
-    every scalar metric."""
+    every scalar metric (floats to ``CSV_DIGITS`` significant digits, agents/evaluate/tables.py)."""
     spec = result.spec
     header = ["agent", "config", *spec.keys, "episode", "seed", *result.metrics]
     rows = ([r.task.agent, r.task.config, *point_of(spec, r), r.task.episode, r.task.seed,
-             *(r.metrics[m] for m in result.metrics)] for r in result.records)
+             *(csv_metric(r.metrics[m]) for m in result.metrics)] for r in result.records)
     return csv_text(header, rows)
 
 

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from marl_vertiport.config import BatteryConfig, EnvConfig
+from marl_vertiport.sim.geometry import length
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
 
 
@@ -41,7 +42,7 @@ def route_energy_pct(start: Sequence[float], waypoints: Sequence[Sequence[float]
     total, here = 0.0, np.asarray(start, dtype=float)
     for w in waypoints:
         w = np.asarray(w, dtype=float)
-        total += leg_energy_pct(float(np.linalg.norm(w - here)), step_len_m, battery)
+        total += leg_energy_pct(length(w - here), step_len_m, battery)
         here = w
     return total
 

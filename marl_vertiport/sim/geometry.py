@@ -1,5 +1,12 @@
 """Planar geometry of conflicts: the paper's closest point of approach (eqs. 3-4) and
-distances between straight path segments. Pure numpy, no state."""
+distances between straight path segments. Pure numpy, no state.
+
+No function here, and nothing in the simulator, hands a product of vectors to BLAS (``@``,
+``np.dot``, ``np.linalg.norm`` of a whole vector): the BLAS library numpy ships picks its kernel
+by the CPU, and its AVX-512 kernel adds ``x0*y0 + x1*y1`` with a fused multiply-add where the
+AVX2 one does not, so a day came out 1e-13 apart on two machines. :func:`dot` and
+:func:`length` add the products left to right in plain double arithmetic, the same on every
+CPU (and the same numbers the AVX2 kernel gives)."""
 
 from __future__ import annotations
 
@@ -8,6 +15,19 @@ import math
 import numpy as np
 
 _EPS = 1e-12
+
+
+def dot(u, v) -> float:
+    """``u . v`` of two short vectors (the products added left to right, no BLAS)."""
+    total = float(u[0]) * float(v[0])
+    for i in range(1, len(u)):
+        total += float(u[i]) * float(v[i])
+    return total
+
+
+def length(u) -> float:
+    """``|u|`` of a short vector: ``sqrt(dot(u, u))``."""
+    return math.sqrt(dot(u, u))
 
 
 def closest_approach(

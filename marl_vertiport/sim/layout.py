@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from marl_vertiport.config import EnvConfig
+from marl_vertiport.sim.geometry import dot
 
 #: Node types of the vertiport graph (feature ``type`` of a port node).
 NORMAL_PORT, CHARGING_PORT, HOVER_SPOT = 0, 1, 2
@@ -77,8 +78,8 @@ class Layout:
         """Where the straight line from ``inside_xy`` to ``outside_xy`` crosses the airspace
         boundary, shape ``(2,)``."""
         d = outside_xy - inside_xy
-        a = float(d @ d)
-        b = 2.0 * float(inside_xy @ d)
-        c = float(inside_xy @ inside_xy) - self.airspace_radius_m ** 2
+        a = dot(d, d)
+        b = 2.0 * dot(inside_xy, d)
+        c = dot(inside_xy, inside_xy) - self.airspace_radius_m ** 2
         t = (-b + np.sqrt(max(b * b - 4 * a * c, 0.0))) / (2 * a)
         return inside_xy + t * d
