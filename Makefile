@@ -52,13 +52,13 @@ test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward
 test-fast: $(STAMP)  ## the test suite without the full-episode tests
 	$(PY) -m pytest -q -m "not slow and not replay"
 
-check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (about 2 minutes)
+check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (under a minute)
 	$(PY) -m pytest -q -m replay tests/test_shipped_results.py
 
-soak: $(STAMP)  ## many days with every uncertainty high on six layouts: invariants after every step, memory (about 2 minutes)
+soak: $(STAMP)  ## many days with every uncertainty high on six layouts: invariants after every step, memory (under a minute on an idle 2-core AMD EPYC)
 	$(CLI) soak --days 40
 
-fuzz: $(STAMP)  ## the property-based tests on many more examples (HYPOTHESIS_PROFILE=long, a few minutes)
+fuzz: $(STAMP)  ## the property-based tests on many more examples (HYPOTHESIS_PROFILE=long, under a minute on an idle 2-core AMD EPYC)
 	HYPOTHESIS_PROFILE=long $(PY) -m pytest -q tests/test_properties.py
 
 # CONFIG names an env config elsewhere; for `train` it names a train config when given.
@@ -67,10 +67,10 @@ TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>, WORKERS=1 for one process)
 	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
 
-check-train: $(STAMP)  ## train as make train does (or CHECKPOINT=path), then pair it with the shipped checkpoint on 200 validation days: M, every safety metric and a verdict (about 10 minutes)
+check-train: $(STAMP)  ## train as make train does (or CHECKPOINT=path), then pair it with the shipped checkpoint on 200 validation days: M, every safety metric and a verdict (7 minutes on an idle 2-core AVX-512 machine)
 	$(CLI) check-train $(if $(CHECKPOINT),--checkpoint $(CHECKPOINT)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
 
-check-train-margin: $(STAMP)  ## measure M of check-train: train seeds 0, 1 and 2 of the default config, play them on the check's days (about 35 minutes)
+check-train-margin: $(STAMP)  ## measure M of check-train: train seeds 0, 1 and 2 of the default config, play them on the check's days (17 minutes there)
 	for seed in 0 1 2; do $(CLI) train --config default --seed $$seed --no-eval --run-dir runs/check-train-margin/seed$$seed $(RUN_ON) || exit 1; done
 	$(CLI) check-train --margin runs/check-train-margin/seed0 runs/check-train-margin/seed1 runs/check-train-margin/seed2 --out runs/check-train-margin/margin $(RUN_ON)
 

@@ -99,6 +99,14 @@ def load_check_config(spec: str | Path = "train") -> EquivalenceConfig:
         raise CheckError(str(exc)) from None
 
 
+def _shown(path: str | Path) -> str:
+    """``path`` relative to the working directory when it lies below it."""
+    try:
+        return Path(path).resolve().relative_to(Path.cwd()).as_posix()
+    except ValueError:
+        return str(path)
+
+
 def checkpoint_of(path: str) -> str:
     """A checkpoint file, or a training run's folder (its last checkpoint)."""
     given = Path(path)
@@ -361,7 +369,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
               "verdict": word, "reasons": reasons,
               "seconds": {"training": trained_s, "evaluation": evaluation.seconds}}
     _write(out, evaluation, command, report)
-    print(f"\ncheck-train: {candidate} against {args.against}")
+    print(f"\ncheck-train: {_shown(candidate)} against {_shown(args.against)}")
     print(f"weights: {describe_weights(diff)}")
     print(f"days: {_days_text(cfg, evaluation)}, paired day by day")
     print(table(stats, cfg.reward_margin, cfg.lost_margin))
