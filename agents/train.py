@@ -1,8 +1,8 @@
-"""``python -m agents.train``: train the GCN ATC (see agents/gcn/train/pipeline.py)."""
+"""``python -m agents.train``: train the GCN ATC (see agents/training/pipeline.py)."""
 
 import sys
 
-from agents.gcn.train.pipeline import main
+from agents.training.pipeline import main
 
 if __name__ == "__main__":
     sys.exit(main())

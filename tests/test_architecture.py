@@ -15,12 +15,12 @@ PACKAGES = ("marl_vertiport", "agents")
 
 #: (layer, module prefixes), lowest first; a module belongs to the layer of its longest prefix.
 LAYERS = (
-    (0, ("marl_vertiport.config", "marl_vertiport.sim")),            # simulator core
+    (0, ("marl_vertiport.config", "marl_vertiport.sim")),            # simulator core and its config
     (1, ("marl_vertiport",)),                                         # env APIs
     (2, ("agents.common", "agents.execution", "agents.controllers",
          "agents.gcn")),                                              # controllers
     (3, ("agents.evaluate", "agents.sweep")),                         # evaluation
-    (4, ("agents", "agents.gcn.train", "agents.train", "agents.render", "agents.bench",
+    (4, ("agents", "agents.training", "agents.train", "agents.render", "agents.bench",
          "agents.studies", "agents.curves", "agents.interop", "agents.checks")),        # training and tools
 )
 LAYER_NAMES = ("simulator core", "env APIs", "controllers", "evaluation", "training and tools")
@@ -89,15 +89,16 @@ def test_imports_point_down(module):
                         + ", ".join(f"{t} ({LAYER_NAMES[layer_of(t)]})" for t in upward))
 
 
-def test_no_import_cycle():
-    """Depth-first search for a back edge; the message shows the cycle."""
+def find_cycle(edges: dict[str, set[str]]) -> list[str] | None:
+    """A cycle of ``edges`` (node -> nodes it points to) as the list of its nodes, first node
+    repeated at the end; None when there is none (depth-first search for a back edge)."""
     state: dict[str, int] = {}  # 1 on the stack, 2 done
     stack: list[str] = []
 
     def visit(node: str) -> list[str] | None:
         state[node] = 1
         stack.append(node)
-        for nxt in sorted(GRAPH.get(node, ())):
+        for nxt in sorted(edges.get(node, ())):
             if state.get(nxt) == 1:
                 return stack[stack.index(nxt):] + [nxt]
             if nxt not in state:
@@ -108,20 +109,69 @@ def test_no_import_cycle():
         state[node] = 2
         return None
 
-    for module in sorted(GRAPH):
-        if module not in state:
-            cycle = visit(module)
-            assert cycle is None, "import cycle: " + " -> ".join(cycle)
+    for node in sorted(edges):
+        if node not in state:
+            cycle = visit(node)
+            if cycle:
+                return cycle
+    return None
+
+
+def test_no_import_cycle():
+    cycle = find_cycle(GRAPH)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
 
 
 def test_the_checker_flags_upward_imports_and_reads_lazy_ones():
     """The checker itself: the former cycle's edge (inference importing training) is flagged,
     a downward import is not, and an import inside a function is in the graph."""
-    assert upward_imports("agents.gcn.policy", {"agents.gcn.train.pipeline"}) == [
-        "agents.gcn.train.pipeline"]
+    assert upward_imports("agents.controllers.gcn", {"agents.training.pipeline"}) == [
+        "agents.training.pipeline"]
     assert upward_imports("agents.controllers.dispatcher", {"agents.evaluate.cli"}) == [
         "agents.evaluate.cli"]
     assert upward_imports("agents.evaluate.run", {"agents.controllers.registry",
                                                    "marl_vertiport.sim.core"}) == []
     # registry.py imports the GCN controller inside make_controller only.
-    assert "agents.gcn.policy" in GRAPH["agents.controllers.registry"]
+    assert "agents.controllers.gcn" in GRAPH["agents.controllers.registry"]
+
+
+def folder_of(module: str) -> str:
+    """The folder (package) a module's file lies in."""
+    path = ROOT.joinpath(*module.split("."))
+    return module if path.is_dir() else module.rpartition(".")[0]
+
+
+def test_a_folder_is_one_layer():
+    """Every module of a folder is in the same layer: the folder tree shows the layers."""
+    layers: dict[str, set[int]] = {}
+    for module in GRAPH:
+        layers.setdefault(folder_of(module), set()).add(layer_of(module))
+    mixed = {folder: sorted(found) for folder, found in layers.items() if len(found) > 1}
+    assert not mixed, f"folders holding modules of several layers: {mixed}"
+
+
+def folder_edges(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """Folder -> the other folders its modules import."""
+    edges: dict[str, set[str]] = {}
+    for module, targets in graph.items():
+        here = folder_of(module)
+        edges.setdefault(here, set()).update(folder_of(t) for t in targets if folder_of(t) != here)
+    return edges
+
+
+def test_no_import_cycle_between_folders():
+    """Folders import each other in one direction only: a loop at folder level (two folders, or
+    more) makes several rooms one."""
+    loop = find_cycle(folder_edges(GRAPH))
+    assert loop is None, "folders in a loop: " + " -> ".join(loop)
+
+
+def test_the_folder_checks_catch_a_loop_and_a_mixed_folder():
+    """The checks themselves, on made-up graphs: a loop through three folders, and the loop of
+    the former layout (inference in agents.gcn importing controllers, the registry importing it)."""
+    made_up = {"agents.controllers.registry": {"agents.gcn.policy"},
+               "agents.gcn.policy": {"agents.controllers.base"}}
+    assert find_cycle(folder_edges(made_up)) == ["agents.controllers", "agents.gcn",
+                                                 "agents.controllers"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None

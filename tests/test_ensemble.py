@@ -1,12 +1,12 @@
-"""The ensemble stage (agents/gcn/train/ensemble.py): refits of the warm start's
+"""The ensemble stage (agents/training/ensemble.py): refits of the warm start's
 demonstrations, days driven by their ensemble, and the actor distilled from it."""
 
 import numpy as np
 import pytest
 import torch
 
-from agents.gcn.policy import GCNController
-from agents.gcn.train.pipeline import TrainConfig, train
+from agents.controllers.gcn import GCNController
+from agents.training.pipeline import TrainConfig, train
 from marl_vertiport.config import ConfigError, build_dataclass, to_dict
 
 PRETRAIN = {"days": 1, "day_steps": 40, "starts": 1, "start_steps": 12, "low_battery_starts": 0,
@@ -50,7 +50,7 @@ def test_the_ensemble_stage_distils_into_the_actor_ppo_starts_from(tmp_path):
 
 
 def test_ensemble_targets_are_the_normalised_geometric_mean_on_legal_actions():
-    from agents.gcn.train.ensemble import ensemble_targets
+    from agents.training.ensemble import ensemble_targets
 
     class Fixed(torch.nn.Module):
         def __init__(self, logits):
@@ -75,8 +75,8 @@ def test_ensemble_targets_are_the_normalised_geometric_mean_on_legal_actions():
 
 def test_refit_actor_leaves_the_warm_start_alone():
     from agents.controllers.registry import SHIPPED_CHECKPOINT
-    from agents.gcn.train.ensemble import refit_actor
-    from agents.gcn.train.imitation import ACTOR_GROUPS
+    from agents.training.ensemble import refit_actor
+    from agents.training.imitation import ACTOR_GROUPS
 
     actor = GCNController(SHIPPED_CHECKPOINT).actor
     before = {k: v.clone() for k, v in actor.state_dict().items()}

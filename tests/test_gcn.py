@@ -16,12 +16,12 @@ from tensordict import TensorDict
 from agents.gcn.distribution import MaskedCategorical
 from agents.gcn.models import GraphActor, GraphCritic
 from agents.controllers.registry import SHIPPED_CHECKPOINT
-from agents.gcn.policy import CheckpointError, GCNController
-from agents.gcn.train.pipeline import (
+from agents.controllers.gcn import CheckpointError, GCNController
+from agents.training.pipeline import (
     TrainConfig, TrainingDiverged, feature_names, latest_checkpoint, runner_config, train,
 )
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
-from agents.gcn.train.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
+from agents.training.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 
 torch.set_num_threads(1)
@@ -247,7 +247,7 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     cfg3 = build_dataclass(TrainConfig, {**to_dict(cfg), "iterations": 3})
     final3 = train(cfg3, tmp_path, resume=True, log=lambda *_: None, evaluate=False)
     assert final3.name == "model_2.pt"
-    assert [int(r["iteration"]) for r in __import__("agents.gcn.train.pipeline", fromlist=["x"]).read_curves(
+    assert [int(r["iteration"]) for r in __import__("agents.training.pipeline", fromlist=["x"]).read_curves(
         tmp_path / "curves.csv")] == [0, 1, 2]
 
 
@@ -349,8 +349,8 @@ def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
 def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
     """A run stopped after the warm start's first round goes on from its saved progress and
     ends with the same warm-started actor as a run never stopped."""
-    import agents.gcn.train.imitation as imitation
-    from agents.gcn.train.pipeline import WARM_STATE, read_curves
+    import agents.training.imitation as imitation
+    from agents.training.pipeline import WARM_STATE, read_curves
 
     cfg = tiny_config("single_agent", iterations=1,
                       pretrain={"days": 1, "day_steps": 24, "starts": 1, "start_steps": 12,
@@ -400,7 +400,7 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
 def test_log_writer_passes_each_iteration_to_the_runs_listener(tmp_path):
     """rsl_rl's LogWriter extension point: the listener sees an iteration as soon as its last
     always-logged scalar arrives, and whole (with Train/ scalars) once the next one starts."""
-    from agents.gcn.train.log_writer import (
+    from agents.training.log_writer import (
         RunLogWriter, register_listener, unregister_listener,
     )
 
@@ -433,7 +433,7 @@ def test_ppo_starts_from_the_warm_start_sharpened_by_the_temperature(tmp_path, m
     """``warm_start_temperature``: model_warmstart.pt keeps the imitation actor; PPO's first
     iteration (actor frozen) holds it with the two output layers divided by the temperature
     and every other weight unchanged."""
-    import agents.gcn.train.pipeline as pipeline
+    import agents.training.pipeline as pipeline
 
     def fake_warm_start(actor, *args, **kwargs):
         with torch.no_grad():
@@ -475,7 +475,7 @@ def _last_index(state: dict, prefix: str) -> int:
 def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):
     from rsl_rl.algorithms import PPO
 
-    from agents.gcn.train.ppo import WarmupPPO
+    from agents.training.ppo import WarmupPPO
 
     seen = []
     monkeypatch.setattr(PPO, "update", lambda self: seen.append(
@@ -495,7 +495,7 @@ def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):
 def test_linear_schedule_decays_the_learning_rate_to_zero_over_the_run(monkeypatch):
     from rsl_rl.algorithms import PPO
 
-    from agents.gcn.train.ppo import WarmupPPO
+    from agents.training.ppo import WarmupPPO
 
     rates = []
     monkeypatch.setattr(PPO, "update", lambda self: rates.append(
@@ -518,7 +518,7 @@ def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path,
     """A pickle whose loading would create a file, handed to evaluation, rendering, a resumed
     run and a resumed warm start: each refuses it with a one-line error; the file never exists."""
     from agents.evaluate import main as evaluate_main
-    from agents.gcn.train.pipeline import main as train_main
+    from agents.training.pipeline import main as train_main
     from agents.render import main as render_main
 
     marker = tmp_path / "ran"
@@ -544,7 +544,7 @@ def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path,
 
     # A hostile warm-start progress file (what a run stopped during its warm start resumes from;
     # test_run_killed_during_the_warm_start_resumes_it goes through that path).
-    from agents.gcn.train.imitation import load_warm_start_state
+    from agents.training.imitation import load_warm_start_state
 
     torch.save({"next_round": 1, "data": _RunsCode(str(marker))}, run / "warmstart_state.pt")
     with pytest.raises(ValueError, match="not a readable warm-start state.*tensors and plain data only"):
@@ -589,7 +589,7 @@ def test_an_ensemble_takes_the_legal_action_of_largest_mean_log_probability(tmp_
     alone; with another, the action is the argmax of the members' mean log-probabilities."""
     from agents.controllers.registry import AgentSpecError, make_controller
     from agents.gcn.distribution import masked_logits
-    from agents.gcn.policy import GCNController, GCNEnsemble
+    from agents.controllers.gcn import GCNController, GCNEnsemble
 
     data = torch.load(SHIPPED_CHECKPOINT, weights_only=True)
     gen = torch.Generator().manual_seed(0)

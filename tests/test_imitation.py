@@ -5,14 +5,14 @@ import numpy as np
 import pytest
 import torch
 
-from agents.gcn.train.imitation import (
+from agents.training.imitation import (
     DayTask, _learner, _with_battery, collect, fit_actor, label_day, label_weights, make_teacher,
     round_tasks,
 )
 from agents.gcn.models import GraphActor
-from agents.gcn.policy import GCNController
+from agents.controllers.gcn import GCNController
 from agents.gcn.features import feature_names
-from agents.gcn.train.pipeline import TrainConfig
+from agents.training.pipeline import TrainConfig
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.vertiport_v0 import raw_env
 
@@ -61,7 +61,7 @@ def test_fit_then_learner_drives_a_dagger_day():
 
 
 def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatch):
-    import agents.gcn.train.imitation as imitation
+    import agents.training.imitation as imitation
 
     env_cfg = to_dict(load_config("paper"))
     clean, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4))
@@ -108,7 +108,7 @@ def test_collect_gives_the_same_data_on_one_or_two_workers():
 
 
 def test_round_tasks_mix_seeds_noise_and_low_batteries():
-    from agents.gcn.train.imitation import round_tasks
+    from agents.training.imitation import round_tasks
 
     cfg = TrainConfig(pretrain=build_dataclass(type(TrainConfig().pretrain), {
         "days": 2, "starts": 3, "low_battery_starts": 5, "low_battery_pct": [10, 30],

@@ -16,12 +16,13 @@ SHORT = ["--set", "schedule.episode_steps=6", "--no-progress", "--workers", "1"]
 
 
 def test_checkpoint_files_of_agent_specs(tmp_path):
-    assert prov.checkpoint_files("gcn") == [SHIPPED_CHECKPOINT]
-    assert prov.checkpoint_files("gcn[deterministic=false]") == [SHIPPED_CHECKPOINT]
-    assert prov.checkpoint_files("runs/a/model_9.pt+gcn") == [Path("runs/a/model_9.pt"),
-                                                              SHIPPED_CHECKPOINT]
-    assert prov.checkpoint_files("heuristic") == []
-    assert prov.checkpoint_files("examples.custom_agent:ChargeFirst") == []
+    from agents.common.specs import checkpoint_files
+
+    assert checkpoint_files("gcn") == [SHIPPED_CHECKPOINT]
+    assert checkpoint_files("gcn[deterministic=false]") == [SHIPPED_CHECKPOINT]
+    assert checkpoint_files("runs/a/model_9.pt+gcn") == [Path("runs/a/model_9.pt"), SHIPPED_CHECKPOINT]
+    assert checkpoint_files("heuristic") == []
+    assert checkpoint_files("examples.custom_agent:ChargeFirst") == []
 
 
 def test_the_record_names_the_commit_the_dirty_flag_and_each_checkpoints_hash(tmp_path):

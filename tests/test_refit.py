@@ -4,8 +4,8 @@ weights, one checkpoint per seed, reproducible, loadable like the run's own."""
 import pytest
 import torch
 
-from agents.gcn.policy import GCNController
-from agents.gcn.train.pipeline import TrainConfig, train
+from agents.controllers.gcn import GCNController
+from agents.training.pipeline import TrainConfig, train
 from agents.studies.refit import main, refit
 from marl_vertiport.config import build_dataclass, to_dict
 

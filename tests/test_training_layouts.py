@@ -10,8 +10,8 @@ import torch
 from tensordict import TensorDict
 
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
-from agents.gcn.train.pipeline import TrainConfig, runner_config
-from agents.gcn.train.vec_env import MultiAgentVecEnv
+from agents.training.pipeline import TrainConfig, runner_config
+from agents.training.vec_env import MultiAgentVecEnv
 from marl_vertiport.config import ConfigError, build_dataclass, to_dict
 
 
@@ -118,7 +118,7 @@ def test_conflict_penalty_is_charged_exactly_on_unresolved_conflicts(mode):
     """The learner's reward differs from the paper's (scaled) by the penalty in the steps whose
     acting eVTOL left a predicted conflict unresolved (S = -5, which the day's ``collisions``
     metric counts), and nowhere else."""
-    from agents.gcn.train.vec_env import SingleAgentVecEnv
+    from agents.training.vec_env import SingleAgentVecEnv
 
     def make(penalty):
         if mode == "multi_agent":
@@ -147,7 +147,7 @@ def test_conflict_penalty_is_charged_exactly_on_unresolved_conflicts(mode):
 def test_single_agent_copies_cycle_scenarios_with_the_same_spaces():
     """The single agent trains across scenarios of one vertiport and fleet (copy k runs config
     k mod len); configs whose spaces differ are refused, naming the one that differs."""
-    from agents.gcn.train.vec_env import SingleAgentVecEnv
+    from agents.training.vec_env import SingleAgentVecEnv
 
     env = SingleAgentVecEnv(["paper", "paper_uncertain"], num_envs=3, seed=2)
     assert [copy.config.name for copy in env.venv.envs] == ["paper", "paper_uncertain", "paper"]
@@ -161,7 +161,7 @@ def test_single_agent_copies_cycle_scenarios_with_the_same_spaces():
 def test_critic_ablation_configs_differ_from_scratch_only_in_what_they_ablate():
     """(b) and (c) of the centralised-critic study extend scratch.yaml (``base:``) and change
     only the critic's input or the mode, so the three runs share every other setting."""
-    from agents.gcn.train.pipeline import load_train_config
+    from agents.training.pipeline import load_train_config
 
     scratch = to_dict(load_train_config("scratch"))
     for name, changed in [("scratch_independent", {"critic": "observation"}),
@@ -175,7 +175,7 @@ def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm
     default distils an ensemble of fits before PPO, single_fit.yaml is the default without
     that stage, and ppo_stage/sharpened.yaml keeps single_fit's warm start (its PPO stage alone
     differs), as it was measured."""
-    from agents.gcn.train.pipeline import TRAIN_CONFIG_DIR, load_train_config
+    from agents.training.pipeline import TRAIN_CONFIG_DIR, load_train_config
 
     files = sorted(TRAIN_CONFIG_DIR.rglob("*.yaml"))
     assert len(files) >= 8

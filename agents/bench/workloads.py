@@ -510,7 +510,7 @@ def bench_profile(days: int, top: int = 14, seed: int = 2300) -> dict[str, Any]:
 def bench_vector(steps: int, copies: int) -> list[dict[str, Any]]:
     import torch
 
-    from agents.gcn.train.vec_env import SingleAgentVecEnv
+    from agents.training.vec_env import SingleAgentVecEnv
 
     rows = []
     for n_copies, procs in ((copies, 1), (2, 1), (2, 2)):
@@ -536,7 +536,7 @@ def bench_inference(repeats: int = 200) -> list[dict[str, Any]]:
 
     from agents.gcn.models import GraphActor
     from agents.gcn.features import POLICY_GROUPS, feature_names
-    from agents.gcn.train.vec_env import MultiAgentVecEnv
+    from agents.training.vec_env import MultiAgentVecEnv
 
     torch.set_num_threads(1)
     env = MultiAgentVecEnv("paper", num_envs=16)  # 64 rows
@@ -581,7 +581,7 @@ def bench_training(iterations: int) -> dict[str, Any]:
     """``make train``'s config for a few PPO iterations (no warm start), in a fresh process."""
     code = (
         "import time, torch, json\n"
-        "from agents.gcn.train.pipeline import load_train_config, make_vec_env, runner_config\n"
+        "from agents.training.pipeline import load_train_config, make_vec_env, runner_config\n"
         "from rsl_rl.runners import OnPolicyRunner\n"
         "cfg = load_train_config('default'); torch.set_num_threads(cfg.torch_threads)\n"
         "env = make_vec_env(cfg)\n"

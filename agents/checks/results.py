@@ -29,7 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
-from agents.common.provenance import REPO_ROOT, checkpoint_files, file_sha256
+from agents.common.provenance import REPO_ROOT, file_sha256
+from agents.common.specs import checkpoint_files
 
 PROG = "python -m agents.checks.results"
 #: Where the shipped result sets live.

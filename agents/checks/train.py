@@ -111,7 +111,7 @@ def checkpoint_of(path: str) -> str:
     """A checkpoint file, or a training run's folder (its last checkpoint)."""
     given = Path(path)
     if given.is_dir():
-        from agents.gcn.train.pipeline import latest_checkpoint
+        from agents.training.pipeline import latest_checkpoint
 
         found = latest_checkpoint(given)
         if found is None:
@@ -126,7 +126,7 @@ def checkpoint_of(path: str) -> str:
 def weight_difference(a: str | Path, b: str | Path) -> dict[str, Any]:
     """How far the actor and critic weights of two checkpoints are apart: ``identical``, the
     largest absolute difference and the norm of the difference over the norm of ``b``'s."""
-    from agents.gcn.policy import read_checkpoint
+    from agents.controllers.gcn import read_checkpoint
 
     da, db = read_checkpoint(a), read_checkpoint(b)
     out: dict[str, Any] = {}
@@ -333,7 +333,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     candidate = args.checkpoint
     try:
         if candidate is None:
-            from agents.gcn.train.pipeline import load_train_config, train
+            from agents.training.pipeline import load_train_config, train
             from marl_vertiport.config import build_dataclass, to_dict
 
             train_cfg = load_train_config(cfg.train_config)

@@ -24,8 +24,10 @@ import subprocess
 from pathlib import Path
 from typing import Any, Iterable
 
-__all__ = ["PNG_KEY", "REPO_ROOT", "checkpoint_files", "code_version", "describe",
-           "file_sha256", "machine", "png_metadata", "provenance", "read_png_metadata"]
+from agents.common.specs import checkpoint_files
+
+__all__ = ["PNG_KEY", "REPO_ROOT", "code_version", "describe", "file_sha256", "machine",
+           "png_metadata", "provenance", "read_png_metadata"]
 
 #: The checkout (or installed tree) the code runs from.
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -62,23 +64,6 @@ def code_version() -> dict[str, Any]:
     status = _git("status", "--porcelain", "--untracked-files=normal", "--", ".", *excluded)
     return {"commit": head.strip() if head else None,
             "dirty": None if status is None else bool(status.strip())}
-
-
-def checkpoint_files(spec: str) -> list[Path]:
-    """The checkpoint files an agent spec plays (``gcn``, a ``.pt`` path, or checkpoints joined
-    by ``+``); none for any other agent."""
-    from agents.controllers.registry import SHIPPED_CHECKPOINT, split_spec
-
-    parts = spec.split("+") if "+" in spec else [split_spec(spec)[0]]
-    files = []
-    for part in parts:
-        if part == "gcn":
-            files.append(SHIPPED_CHECKPOINT)
-        elif part.endswith(".pt"):
-            files.append(Path(part))
-        elif "+" in spec:
-            return []
-    return files
 
 
 def _shown(path: Path) -> str:

@@ -13,11 +13,11 @@ VALIDATION_SEED_BASE = TRAINING_SEED_END
 EVAL_SEED_BASE = 1_000_000
 #: The held-out evaluation seeds, in order (episode k of an evaluation uses EVAL_SEEDS[k]).
 EVAL_SEEDS = tuple(range(EVAL_SEED_BASE, EVAL_SEED_BASE + 1000))
-#: First seed of the warm start's demonstration days (agents/gcn/train/imitation.py), in the
+#: First seed of the warm start's demonstration days (agents/training/imitation.py), in the
 #: training range: ``WARM_START_SEED_BASE + 1000 * train seed + 100 * round + day``.
 WARM_START_SEED_BASE = 700_000
 #: First seed of the days the ensemble of imitation fits drives before its distillation
-#: (agents/gcn/train/ensemble.py), in the training range: ``ENSEMBLE_SEED_BASE + 1000 * train
+#: (agents/training/ensemble.py), in the training range: ``ENSEMBLE_SEED_BASE + 1000 * train
 #: seed + day``.
 ENSEMBLE_SEED_BASE = 610_000
 

@@ -2,5 +2,5 @@
 
 ``base`` (the :class:`Controller` protocol, the observation reader, the AEC episode loop),
 the built-ins (``random_agent``, ``fcfs``, ``dispatcher``, ``planner``) and ``registry``, which
-resolves a name, an import path or a checkpoint to a controller. The learned controller lives
-in :mod:`agents.gcn`."""
+resolves a name, an import path or a checkpoint to a controller. ``gcn`` plays a trained
+checkpoint (its network is :mod:`agents.gcn`)."""

@@ -4,7 +4,7 @@
 or a ready object; modules and files resolve from the working directory, as under
 ``python -m``), the path
 of a training checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
-:class:`agents.gcn.policy.GCNEnsemble`).
+:class:`agents.controllers.gcn.GCNEnsemble`).
 
 A built-in name or an import path may carry constructor arguments in brackets, values read as
 YAML: ``heuristic[holding=false]``, ``rollout[horizon=80,nominal=false]``,
@@ -14,12 +14,12 @@ Quote it in a shell (``'heuristic[holding=false]'``): brackets are glob characte
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import Any
 
-#: The trained policy shipped with the repository (see agents/checkpoints/README.md).
-SHIPPED_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "gcn_default.pt"
+from agents.common.specs import (  # noqa: F401 (re-exported: part of the registry's API)
+    SHIPPED_CHECKPOINT, AgentSpecError, split_spec,
+)
 
 #: Built-in controllers: name -> import path.
 BUILTIN = {
@@ -30,10 +30,6 @@ BUILTIN = {
 }
 
 
-class AgentSpecError(ValueError):
-    """An agent name or import path that does not give a controller."""
-
-
 def agent_help() -> str:
     """What an agent spec may be, for the ``--help`` of every command that takes one."""
     names = ", ".join([*BUILTIN, "gcn"])
@@ -42,37 +38,6 @@ def agent_help() -> str:
             "'package.module:Class' or a file 'path/to/file.py:Class' (both from the working "
             "directory); constructor arguments "
             "in brackets, e.g. 'heuristic[holding=false]'")
-
-
-_ARGS = re.compile(r"^(?P<target>[^\[\]]+)\[(?P<args>[^\[\]]*)\]$")
-
-
-def split_spec(spec: str) -> tuple[str, dict[str, Any]]:
-    """``"heuristic[holding=false,priority_margin_pct=3]"`` ->
-    ``("heuristic", {"holding": False, "priority_margin_pct": 3})``; a spec without brackets
-    gives no arguments.
-
-    Raises:
-        AgentSpecError: unbalanced brackets, an argument that is not ``key=value``, or a value
-            that is not valid YAML.
-    """
-    import yaml
-
-    if "[" not in spec and "]" not in spec:
-        return spec, {}
-    match = _ARGS.match(spec)
-    if match is None:
-        raise AgentSpecError(f"agent {spec!r}: arguments look like 'name[key=value,key=value]'")
-    kwargs: dict[str, Any] = {}
-    for item in filter(None, (part.strip() for part in match["args"].split(","))):
-        key, sep, raw = item.partition("=")
-        if not sep or not key.strip().isidentifier():
-            raise AgentSpecError(f"agent {spec!r}: argument {item!r} is not key=value")
-        try:
-            kwargs[key.strip()] = yaml.safe_load(raw)
-        except yaml.YAMLError as exc:
-            raise AgentSpecError(f"agent {spec!r}: argument {item!r}: not valid YAML ({exc})") from None
-    return match["target"].strip(), kwargs
 
 
 def _import(path: str, spec: str) -> Any:
@@ -99,7 +64,7 @@ def make_controller(spec: str) -> Any:
         AgentSpecError: unknown name, import failure, or an object without ``act``.
     """
     if "+" in spec and all(p.endswith(".pt") or p == "gcn" for p in spec.split("+")):
-        from agents.gcn.policy import CheckpointError, GCNEnsemble
+        from agents.controllers.gcn import CheckpointError, GCNEnsemble
 
         try:  # checkpoints joined by "+": their ensemble
             return GCNEnsemble([_checkpoint_path(p) for p in spec.split("+")])
@@ -107,7 +72,7 @@ def make_controller(spec: str) -> Any:
             raise AgentSpecError(f"agent {spec!r}: {exc}") from exc
     target_spec, kwargs = split_spec(spec)
     if target_spec == "gcn" or target_spec.endswith(".pt"):
-        from agents.gcn.policy import CheckpointError, GCNController
+        from agents.controllers.gcn import CheckpointError, GCNController
 
         try:
             return GCNController(_checkpoint_path(target_spec), **kwargs)

@@ -4,7 +4,7 @@ weights with other seeds.
 A training run keeps every decision its warm start was fit on (``warmstart_state.pt``). This
 study fits that data again, once per seed, exactly as the run did (its ``pretrain`` epochs,
 batch size, learning rate and regret weights) but from weights drawn afresh with seed
-``1000 + k`` (``agents.gcn.train.ensemble.refit_actor``, which the pipeline's ensemble stage uses),
+``1000 + k`` (``agents.training.ensemble.refit_actor``, which the pipeline's ensemble stage uses),
 and writes each actor as a checkpoint that the evaluation loads like the run's own
 ``model_warmstart.pt``. The spread of their scores on the same days is what the fit alone
 contributes; a later training stage has to beat it to be told apart from a lucky fit
@@ -42,10 +42,10 @@ def refit(run_dir: str | Path, seeds: Sequence[int], out_dir: str | Path,
         ValueError: ``run_dir`` has no warm start to refit, or a file in it cannot be read
             (the message names it).
     """
-    from agents.gcn.policy import GCNController, read_checkpoint
-    from agents.gcn.train.ensemble import REFIT_SEED_BASE, refit_actor
-    from agents.gcn.train.imitation import load_warm_start_state
-    from agents.gcn.train.pipeline import WARM_STATE, load_train_config
+    from agents.controllers.gcn import GCNController, read_checkpoint
+    from agents.training.ensemble import REFIT_SEED_BASE, refit_actor
+    from agents.training.imitation import load_warm_start_state
+    from agents.training.pipeline import WARM_STATE, load_train_config
 
     run_dir, out_dir = Path(run_dir), Path(out_dir)
     for name in ("train_config.yaml", WARM_STATE, "model_warmstart.pt"):

@@ -81,7 +81,7 @@ def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: i
 def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Run one day; return the observations of the steps with a choice, the teacher's label of
     each (``label``, shape ``(T,)``), and the metrics of the day (so far, for a partial day)."""
-    from agents.gcn.policy import GCNController
+    from agents.controllers.gcn import GCNController
     from marl_vertiport.config import from_dict
     from marl_vertiport.gym_env import VertiportEnv
 
@@ -319,7 +319,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                on_round: Callable[[dict[str, float]], None] | None = None,
                backend: Backend | None = None) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
-    docstring); ``cfg`` is the :class:`~agents.gcn.train.pipeline.TrainConfig`.
+    docstring); ``cfg`` is the :class:`~agents.training.pipeline.TrainConfig`.
 
     ``env_config``: the env config, or a list of them (scenarios; days are padded to the
     largest vertiport and fleet of the list).

@@ -9,7 +9,7 @@ fit?"), so one warm start is one draw from a lottery. This stage averages the lo
    exactly as the warm start was fit (:func:`refit_actor`; the same function as
    ``python -m agents.studies.refit``).
 2. **Ensemble days.** The warm-started actor and its refits, as one controller
-   (:class:`agents.gcn.policy.GCNEnsemble`: the legal action of largest mean log-probability),
+   (:class:`agents.controllers.gcn.GCNEnsemble`: the legal action of largest mean log-probability),
    drive ``ensemble.days`` full training days (the scenarios in turn; seeds
    ``ENSEMBLE_SEED_BASE + 1000 * seed + d``) as tasks of the execution layer; the states with a
    choice are kept.
@@ -32,7 +32,7 @@ import torch
 
 from agents.common.seeds import ENSEMBLE_SEED_BASE, training_seed
 from agents.execution import Backend, LocalBackend
-from agents.gcn.train.imitation import ACTOR_GROUPS, _learner, collect, fit_actor, to_tensordict
+from agents.training.imitation import ACTOR_GROUPS, _learner, collect, fit_actor, to_tensordict
 
 #: Offset of the refits' seeds: refit ``k`` draws its weights and batches with ``REFIT_SEED_BASE + k``.
 REFIT_SEED_BASE = 1000
@@ -65,7 +65,7 @@ class EnsembleDay:
 def drive_day(task: EnsembleDay) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Run one day with the ensemble; return the observations of the steps with a choice (the
     ensemble's action as ``label``, shape ``(T,)``) and the day's metrics."""
-    from agents.gcn.policy import GCNEnsemble
+    from agents.controllers.gcn import GCNEnsemble
     from marl_vertiport.config import from_dict
     from marl_vertiport.gym_env import VertiportEnv
 
@@ -98,9 +98,9 @@ def drive_day(task: EnsembleDay) -> tuple[dict[str, np.ndarray], dict[str, Any]]
 
 def ensemble_targets(members: list, obs) -> torch.Tensor:
     """``(N, A)`` the ensemble's policy on a batch: the softmax of the members' mean masked
-    log-probabilities (:func:`agents.gcn.policy.mean_log_probabilities`; their normalised
+    log-probabilities (:func:`agents.controllers.gcn.mean_log_probabilities`; their normalised
     geometric mean), 0 on illegal actions."""
-    from agents.gcn.policy import mean_log_probabilities
+    from agents.controllers.gcn import mean_log_probabilities
 
     mask = obs["action_mask"].bool()
     logp = mean_log_probabilities(members, obs)
@@ -110,7 +110,7 @@ def ensemble_targets(members: list, obs) -> torch.Tensor:
 def distil(student, members: list, data: dict[str, np.ndarray], epochs: int, batch_size: int,
            learning_rate: float, seed: int, log: Callable[[str], None]) -> dict[str, float]:
     """Train ``student`` to match the ensemble's policy (:func:`ensemble_targets`) on ``data``:
-    :func:`~agents.gcn.train.imitation.fit_actor` with the ensemble's probabilities as soft
+    :func:`~agents.training.imitation.fit_actor` with the ensemble's probabilities as soft
     targets (every decision weighing 1)."""
     target = ensemble_targets(members, to_tensordict(data))
     plain = {**data, "regret": np.zeros(len(target), dtype=np.float32)}

@@ -9,7 +9,7 @@ the warm start, after the warm start's last finished round.
 
 rsl_rl does the rollouts, PPO updates, logging and checkpoint content; this module only
 configures it, optionally warm-starts the actor by imitation of a teacher (the look-ahead
-planner or the expert dispatcher; see agents/gcn/train/imitation.py), wraps ``save`` to be atomic and
+planner or the expert dispatcher; see agents/training/imitation.py), wraps ``save`` to be atomic and
 adds a per-iteration hook (progress line, NaN stop, learning curves).
 """
 
@@ -35,20 +35,20 @@ import yaml
 from agents.common.files import write_atomic, write_torch_atomic
 from agents.common.provenance import png_metadata, provenance
 from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
-from agents.gcn.train.ensemble import distil_ensemble
-from agents.gcn.train.imitation import (
+from agents.training.ensemble import distil_ensemble
+from agents.training.imitation import (
     ROUND_METRICS, TEACHERS, load_warm_start_state, padded_sizes, warm_start,
 )
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
-from agents.gcn.train.log_writer import register_listener, unregister_listener
-from agents.gcn.train.vec_env import CRITIC_INPUTS, ROW_LAYOUTS
+from agents.training.log_writer import register_listener, unregister_listener
+from agents.training.vec_env import CRITIC_INPUTS, ROW_LAYOUTS
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 from marl_vertiport.config import (
     ConfigError, build_dataclass, load_config, load_yaml_dataclass, to_dict,
 )
 
-TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[3] / "configs" / "train"
+TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
 CHECKPOINT_FORMAT = 2  # 2: size-agnostic models, the feature schema in the metadata
 #: Columns of ``warmstart.csv``: one row per warm-start round (``driver`` 0: the teacher drove,
 #: 1: the actor); ``env_steps`` counts demonstration steps so far; the last row's ``kept_round``
@@ -63,7 +63,7 @@ CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_los
 # ------------------------------------------------------------------------------ config schema
 @dataclass(frozen=True)
 class PretrainConfig:
-    """Warm start of the actor by imitation (agents/gcn/train/imitation.py)."""
+    """Warm start of the actor by imitation (agents/training/imitation.py)."""
 
     days: int = 0
     """Days of demonstrations per round (0: no warm start)."""
@@ -145,7 +145,7 @@ class EvaluationConfig:
 @dataclass(frozen=True)
 class EnsembleConfig:
     """Distillation of an ensemble of imitation fits after the warm start
-    (agents/gcn/train/ensemble.py)."""
+    (agents/training/ensemble.py)."""
 
     fits: int = 0
     """Refits of the warm start's demonstrations from fresh weights; with the warm start they
@@ -186,7 +186,7 @@ class TrainConfig:
     rows: str = "agents"
     """Multi-agent mode: ``agents`` (a row per env copy and eVTOL; the rows whose eVTOL has no
     turn only "stay") or ``turns`` (a row per copy: the eVTOL whose turn it is); see
-    agents/gcn/train/vec_env.py."""
+    agents/training/vec_env.py."""
     critic: str = "state"
     """Multi-agent mode: ``state`` (the centralised critic reads ``state()``) or
     ``observation`` (each eVTOL's critic reads its own observation, shared weights). The
@@ -281,10 +281,10 @@ def runner_config(cfg: TrainConfig) -> dict[str, Any]:
         "num_steps_per_env": cfg.num_steps_per_env,
         "save_interval": cfg.save_interval,
         # Our progress line, curves and divergence check, through rsl_rl's LogWriter extension.
-        "logger": {"class_name": "agents.gcn.train.log_writer:RunLogWriter"},
+        "logger": {"class_name": "agents.training.log_writer:RunLogWriter"},
         "obs_groups": {"actor": list(POLICY_GROUPS),
                        "critic": list(STATE_GROUPS if centralised_critic else POLICY_GROUPS)},
-        "algorithm": {"class_name": "agents.gcn.train.ppo:WarmupPPO", **to_dict(cfg.algorithm),
+        "algorithm": {"class_name": "agents.training.ppo:WarmupPPO", **to_dict(cfg.algorithm),
                       "critic_warmup_updates": cfg.critic_warmup_iterations,
                       "total_updates": cfg.iterations},
         "actor": {"class_name": "agents.gcn.models:GraphActor", "feature_names": feature_names("observation"),
@@ -301,7 +301,7 @@ def scenario_configs(cfg: TrainConfig) -> list:
 
 
 def make_vec_env(cfg: TrainConfig):
-    from agents.gcn.train.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
+    from agents.training.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
 
     if cfg.mode == "multi_agent":
         return MultiAgentVecEnv(scenario_configs(cfg), num_envs=cfg.num_envs, device=cfg.device,
@@ -557,7 +557,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
             log(msg)
 
     class Progress:
-        """The run's listener (agents/gcn/train/log_writer.py): divergence check, progress
+        """The run's listener (agents/training/log_writer.py): divergence check, progress
         line and the row of curves.csv of every iteration."""
 
         def iteration_updated(self, it: int, scalars: dict[str, float]) -> None:

@@ -1,6 +1,8 @@
-"""Typed configuration of the vertiport simulator.
+"""The env config's schema: the vertiport's layout, flight, schedule, battery, reward, safety,
+uncertainty and ATC settings as frozen dataclasses, their physical bounds, and
+:func:`load_config`.
 
-YAML files in ``configs/env/`` hold the values; the frozen dataclasses below are the schema.
+YAML files in ``configs/env/`` hold the values; the dataclasses below are the schema.
 Loading checks every key and type and every physical bound, and the error names the field
 (``layout.charging_ports_xy_m: ...``), so a broken file never produces a half-built env.
 
@@ -10,47 +12,20 @@ Units are in the field names: ``_m`` metres, ``_mps`` metres per second, ``_s`` 
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import types
-import typing
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import yaml
+from marl_vertiport.config.typed import (
+    ConfigError, UnknownKeyError, build_dataclass, read_yaml, resolve_path, set_dotted, to_dict,
+)
 
 #: Folder with the shipped environment configs (``paper.yaml``, ``paper_uncertain.yaml``, ...),
 #: inside the package so that an installed wheel finds them too (``configs/env/`` in the
 #: repository links here).
 CONFIG_DIR = Path(str(resources.files("marl_vertiport").joinpath("configs")))
-
-
-class ConfigError(ValueError):
-    """A config file or override that cannot describe a valid vertiport."""
-
-
-class UnknownKeyError(ConfigError):
-    """An override (``--set``, ``EnvConfig.replace``, a keyword) names no config key or
-    section; the message lists the known ones. ``keyword`` is the override as it was given
-    (``uncertainty__wind_gust_prob`` or ``uncertainty.wind_gust_prob``) where known."""
-
-    keyword: str | None = None
-
-
-class UnexpectedKeywordError(UnknownKeyError, TypeError):
-    """An env constructor's keyword that is no config key: a :class:`ConfigError`, as the
-    env's documentation promises, and a ``TypeError``, Python's and Gymnasium's convention
-    for an unexpected keyword argument (wrappers such as TorchRL's ``GymEnv`` rely on it, and
-    on its message starting as Python's own does)."""
-
-    @classmethod
-    def of(cls, owner: str, error: UnknownKeyError) -> "UnexpectedKeywordError":
-        """The constructor error of ``owner`` (a class name) for an override ``error``."""
-        new = cls(f"{owner}() got an unexpected keyword argument {error.keyword!r}: {error}")
-        new.keyword = error.keyword
-        return new
 
 
 # --------------------------------------------------------------------------------------
@@ -228,7 +203,7 @@ class EnvConfig:
         data = to_dict(self)
         for key, value in overrides.items():
             try:
-                _set_dotted(data, key.replace("__", ".") if isinstance(key, str) else key, value)
+                set_dotted(data, key.replace("__", ".") if isinstance(key, str) else key, value)
             except UnknownKeyError as exc:
                 exc.keyword = key
                 raise
@@ -379,187 +354,9 @@ def _validate(cfg: EnvConfig) -> None:
     _check(0 <= reserve <= 100, "atc.energy_reserve_pct", f"must lie in [0, 100], got {reserve}")
 
 
-# --------------------------------------------------------------------------------------
-# Generic dict <-> dataclass with type checks
-# --------------------------------------------------------------------------------------
-
-
-def _coerce(value: Any, tp: Any, where: str) -> Any:
-    origin = typing.get_origin(tp)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true/false, got {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where}: expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{where}: must be a finite number, got {value!r}")
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
-        return value
-    if dataclasses.is_dataclass(tp):
-        return _build(tp, value, where)
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise ConfigError(f"{where}: expected a list of {len(args)} values, got {value!r}")
-        return tuple(_coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
-    if origin in (typing.Union, types.UnionType):
-        raise ConfigError(f"{where}: unsupported union type")  # not used by the schema
-    raise ConfigError(f"{where}: unsupported type {tp}")
-
-
-def _build(cls: type, data: Any, where: str) -> Any:
-    if isinstance(data, cls):
-        return data
-    if not isinstance(data, dict):
-        raise ConfigError(f"{where or 'config'}: expected a mapping, got {data!r}")
-    hints = typing.get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted((k for k in data if k not in names), key=str)
-    if unknown:
-        prefix = f"{where}." if where else ""
-        raise ConfigError(f"{prefix}{unknown[0]}: unknown key (known: {', '.join(sorted(names))})")
-    kwargs = {}
-    for key, value in data.items():
-        kwargs[key] = _coerce(value, hints[key], f"{where}.{key}" if where else key)
-    return cls(**kwargs)
-
-
-def build_dataclass(cls: type, data: Any, where: str = "") -> Any:
-    """Build any (nested) frozen dataclass schema from plain data with the same checks as the
-    env config: unknown keys and wrong types fail with the field named."""
-    return _build(cls, data, where)
-
-
-def find_yaml(spec: str | Path, folder: Path, kind: str) -> Path:
-    """The file ``spec`` names: a name in ``folder`` (without ``.yaml``) or a path. A missing
-    one raises ``ConfigError`` naming ``kind`` and the shipped names."""
-    path = Path(spec)
-    if not path.suffix and not path.exists():
-        path = folder / f"{spec}.yaml"
-    if not path.is_file():
-        known = ", ".join(sorted(p.relative_to(folder).with_suffix("").as_posix()
-                                 for p in folder.rglob("*.yaml")))
-        raise ConfigError(f"{kind} {str(spec)!r}: no such file (shipped: {known})")
-    return path
-
-
-def load_yaml_dataclass(cls: type, spec: str | Path, folder: Path, kind: str) -> Any:
-    """A ``cls`` schema from a YAML file: ``spec`` is a name in ``folder`` (without ``.yaml``)
-    or a path; the file may extend another with ``base: <path relative to it>``. A missing file (``kind`` names what was looked for, with the shipped names), bad
-    YAML or a schema error raises ``ConfigError`` naming the file."""
-    path = find_yaml(spec, folder, kind)
-    data = _read_yaml(path, seen=())  # a ``base:`` key names a file it extends
-    try:
-        return build_dataclass(cls, data)
-    except ConfigError as exc:
-        raise ConfigError(f"{path}: {exc}") from exc
-
-
 def from_dict(data: dict[str, Any]) -> EnvConfig:
     """Build and validate an :class:`EnvConfig` from plain data (as loaded from YAML)."""
-    return _build(EnvConfig, data, "")
-
-
-def to_dict(cfg: Any) -> dict[str, Any]:
-    """Plain nested dict (lists for tuples) of a config, suitable for YAML."""
-
-    def conv(v: Any) -> Any:
-        if dataclasses.is_dataclass(v):
-            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
-        if isinstance(v, tuple):
-            return [conv(x) for x in v]
-        return v
-
-    return conv(cfg)
-
-
-def _known(node: dict[str, Any], sections: bool = False) -> str:
-    """The keys of a config level, for an error message (only its sections if asked)."""
-    keys = sorted(k for k, v in node.items() if not sections or isinstance(v, dict))
-    return ", ".join(keys)
-
-
-def _set_dotted(data: dict[str, Any], key: str, value: Any, prefix: str = "") -> None:
-    """Set ``key`` (dotted, below ``prefix``) of ``data`` to ``value``; a dict value sets the
-    section's keys one by one. Errors name the full dotted key and list the known keys
-    (:class:`UnknownKeyError`)."""
-    if not isinstance(key, str):
-        raise UnknownKeyError(f"{prefix}{key!r}: unknown key (keys are names; known: "
-                              f"{_known(data)})")
-    parts = key.split(".")
-    node = data
-    for i, part in enumerate(parts[:-1]):
-        if part not in node or not isinstance(node[part], dict):
-            where = f" in {prefix[:-1]}" if prefix else ""
-            raise UnknownKeyError(f"{prefix}{'.'.join(parts[: i + 1])}: unknown config section"
-                                  f"{where} (sections: {_known(node, sections=True)})")
-        node = node[part]
-    last = parts[-1]
-    if isinstance(value, dict) and isinstance(node.get(last), dict):
-        for sub_key, sub_value in value.items():
-            _set_dotted(node[last], sub_key, sub_value, f"{prefix}{key}.")
-    elif last not in node:
-        raise UnknownKeyError(f"{prefix}{key}: unknown key (known: {_known(node)})")
-    else:
-        node[last] = to_dict(value) if dataclasses.is_dataclass(value) else value
-
-
-def _merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for key, value in top.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
-def _read_yaml(path: Path, seen: tuple[Path, ...]) -> dict[str, Any]:
-    """Read a config file; a ``base: <name or path>`` key names a file it extends."""
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping of config keys, got {type(data).__name__}")
-    base = data.pop("base", None)
-    if base is None:
-        return data
-    if not isinstance(base, str):
-        raise ConfigError(f"{path}: base: expected a config name or path, got {base!r}")
-    base_path = _resolve_path(base, relative_to=path.parent)
-    if base_path.resolve() in seen:
-        raise ConfigError(f"{path}: base: {base!r} includes itself")
-    return _merge(_read_yaml(base_path, seen + (path.resolve(),)), data)
-
-
-def _resolve_path(config: str | Path, relative_to: Path | None = None) -> Path:
-    path = Path(config)
-    candidates = [path]
-    if relative_to is not None and not path.is_absolute():
-        candidates.insert(0, relative_to / path)
-    if not path.suffix:
-        candidates.append(CONFIG_DIR / f"{config}.yaml")
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate
-    known = ", ".join(sorted(p.stem for p in CONFIG_DIR.glob("*.yaml")))
-    raise ConfigError(f"config {str(config)!r}: no such file (shipped configs: {known})")
+    return build_dataclass(EnvConfig, data)
 
 
 def load_config(config: str | Path | EnvConfig | dict | None = None, **overrides: Any) -> EnvConfig:
@@ -578,8 +375,8 @@ def load_config(config: str | Path | EnvConfig | dict | None = None, **overrides
     elif isinstance(config, dict):
         cfg = from_dict(config)
     else:
-        path = _resolve_path(config)
-        data = _read_yaml(path, seen=())
+        path = resolve_path(config, CONFIG_DIR)
+        data = read_yaml(path, CONFIG_DIR)
         try:
             cfg = from_dict(data)
         except ConfigError as exc:

@@ -14,7 +14,7 @@ TensorBoard, as rsl_rl's default writer does, and passes each iteration's scalar
   iteration's first scalar, or when the writer stops.
 
 The writer is built by rsl_rl from ``train_cfg["logger"] = {"class_name":
-"agents.gcn.train.log_writer:RunLogWriter"}``; it finds its listener by the run folder.
+"agents.training.log_writer:RunLogWriter"}``; it finds its listener by the run folder.
 """
 
 from __future__ import annotations
