@@ -31,7 +31,7 @@ from collections.abc import Sequence
 COMMANDS = {
     "evaluate": ("agents.evaluate.cli", "evaluate controllers on cases or a suite"),
     "sweep": ("agents.sweep.cli", "a grid of agents x cases x config overrides x days"),
-    "train": ("agents.training.pipeline", "train the GCN ATC from a train config"),
+    "train": ("agents.training.cli", "train the GCN ATC from a train config"),
     "curves": ("agents.curves.cli", "learning curves over training seeds"),
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),

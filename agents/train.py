@@ -1,8 +1,8 @@
-"""``python -m agents.train``: train the GCN ATC (see agents/training/pipeline.py)."""
+"""``python -m agents.train``: train the GCN ATC (agents/training/cli.py)."""
 
 import sys
 
-from agents.training.pipeline import main
+from agents.training.cli import main
 
 if __name__ == "__main__":
     sys.exit(main())

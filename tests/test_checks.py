@@ -81,7 +81,7 @@ def test_a_broken_check_config_is_refused_naming_the_key(tmp_path, capsys, text,
 
 def test_the_shipped_check_config_names_real_configs_and_validation_days():
     from agents.common.seeds import EVAL_SEED_BASE, VALIDATION_SEED_BASE
-    from agents.training.pipeline import load_train_config
+    from agents.training.config import load_train_config
     from marl_vertiport import load_config
 
     cfg = check.load_check_config()

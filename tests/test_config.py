@@ -73,7 +73,7 @@ def test_unknown_config_name_lists_shipped_ones():
 
 
 def test_unknown_train_config_lists_the_ones_in_subfolders():
-    from agents.training.pipeline import load_train_config
+    from agents.training.config import load_train_config
 
     with pytest.raises(ConfigError, match="ppo_stage/sharpened"):
         load_train_config("no_such_config")

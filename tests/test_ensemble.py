@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from agents.controllers.gcn import GCNController
-from agents.training.pipeline import TrainConfig, train
+from agents.training.config import TrainConfig
+from agents.training.pipeline import train
 from marl_vertiport.config import ConfigError, build_dataclass, to_dict
 
 PRETRAIN = {"days": 1, "day_steps": 40, "starts": 1, "start_steps": 12, "low_battery_starts": 0,

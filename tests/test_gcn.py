@@ -17,9 +17,13 @@ from agents.gcn.distribution import MaskedCategorical
 from agents.gcn.models import GraphActor, GraphCritic
 from agents.controllers.registry import SHIPPED_CHECKPOINT
 from agents.controllers.gcn import CheckpointError, GCNController
-from agents.training.pipeline import (
-    TrainConfig, TrainingDiverged, feature_names, latest_checkpoint, runner_config, train,
-)
+from agents.gcn.features import feature_names
+from agents.training.callbacks import TrainingDiverged
+from agents.training.checkpoints import latest_checkpoint
+from agents.training.config import TrainConfig
+from agents.training.curves import read_curves
+from agents.training.pipeline import train
+from agents.training.runner import runner_config
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
 from agents.training.vec_env import MultiAgentVecEnv, SingleAgentVecEnv
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
@@ -247,8 +251,7 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     cfg3 = build_dataclass(TrainConfig, {**to_dict(cfg), "iterations": 3})
     final3 = train(cfg3, tmp_path, resume=True, log=lambda *_: None, evaluate=False)
     assert final3.name == "model_2.pt"
-    assert [int(r["iteration"]) for r in __import__("agents.training.pipeline", fromlist=["x"]).read_curves(
-        tmp_path / "curves.csv")] == [0, 1, 2]
+    assert [int(r["iteration"]) for r in read_curves(tmp_path / "curves.csv")] == [0, 1, 2]
 
 
 class _RunsCode:
@@ -350,7 +353,7 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
     """A run stopped after the warm start's first round goes on from its saved progress and
     ends with the same warm-started actor as a run never stopped."""
     import agents.training.imitation as imitation
-    from agents.training.pipeline import WARM_STATE, read_curves
+    from agents.training.checkpoints import WARM_STATE
 
     cfg = tiny_config("single_agent", iterations=1,
                       pretrain={"days": 1, "day_steps": 24, "starts": 1, "start_steps": 12,
@@ -397,34 +400,31 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
         imitation.load_warm_start_state(tmp_path / "cut" / WARM_STATE)
 
 
-def test_log_writer_passes_each_iteration_to_the_runs_listener(tmp_path):
-    """rsl_rl's LogWriter extension point: the listener sees an iteration as soon as its last
-    always-logged scalar arrives, and whole (with Train/ scalars) once the next one starts."""
-    from agents.training.log_writer import (
-        RunLogWriter, register_listener, unregister_listener,
-    )
+def test_log_writer_passes_each_iteration_to_the_runs_callback(tmp_path):
+    """rsl_rl's LogWriter extension point: the callback (handed over in the runner's config
+    through store_config) sees an iteration as soon as its last always-logged scalar arrives,
+    and whole (with Train/ scalars) once the next one starts."""
+    from agents.training.callbacks import Callback
+    from agents.training.log_writer import CALLBACK_KEY, RunLogWriter
 
     calls = []
 
-    class Listener:
-        def iteration_updated(self, it, scalars):
+    class Recorder(Callback):
+        def on_iteration(self, it, scalars):
             calls.append(("updated", it, sorted(scalars)))
 
-        def iteration_done(self, it, scalars):
+        def on_iteration_end(self, it, scalars):
             calls.append(("done", it, scalars.get("Train/mean_reward")))
 
-    register_listener(tmp_path, Listener())
-    try:
-        writer = RunLogWriter(str(tmp_path), tensorboard=False)
-        for it, reward in ((0, None), (1, 12.5)):
-            writer.add_scalar("Loss/value", 0.5, it)
-            writer.add_scalar("Perf/learning_time", 0.1, it)
-            if reward is not None:
-                writer.add_scalar("Train/mean_reward", reward, it)
-                writer.add_scalar("Train/mean_reward/time", reward, 37)  # indexed by seconds
-        writer.stop()
-    finally:
-        unregister_listener(tmp_path)
+    writer = RunLogWriter(str(tmp_path), tensorboard=False)
+    writer.store_config({}, {"num_steps_per_env": 8, CALLBACK_KEY: Recorder()})
+    for it, reward in ((0, None), (1, 12.5)):
+        writer.add_scalar("Loss/value", 0.5, it)
+        writer.add_scalar("Perf/learning_time", 0.1, it)
+        if reward is not None:
+            writer.add_scalar("Train/mean_reward", reward, it)
+            writer.add_scalar("Train/mean_reward/time", reward, 37)  # indexed by seconds
+    writer.stop()
     assert calls == [("updated", 0, ["Loss/value", "Perf/learning_time"]), ("done", 0, None),
                      ("updated", 1, ["Loss/value", "Perf/learning_time"]), ("done", 1, 12.5)]
 
@@ -518,7 +518,7 @@ def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path,
     """A pickle whose loading would create a file, handed to evaluation, rendering, a resumed
     run and a resumed warm start: each refuses it with a one-line error; the file never exists."""
     from agents.evaluate import main as evaluate_main
-    from agents.training.pipeline import main as train_main
+    from agents.training.cli import main as train_main
     from agents.render import main as render_main
 
     marker = tmp_path / "ran"

@@ -12,7 +12,7 @@ from agents.training.imitation import (
 from agents.gcn.models import GraphActor
 from agents.controllers.gcn import GCNController
 from agents.gcn.features import feature_names
-from agents.training.pipeline import TrainConfig
+from agents.training.config import TrainConfig
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.vertiport_v0 import raw_env
 

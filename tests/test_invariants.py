@@ -143,7 +143,7 @@ def test_episode_summary_has_exactly_the_registered_metrics_in_order():
     """One source for the metric list: the summary, the evaluation's labels and the training
     logs all follow marl_vertiport.sim.metrics.METRICS."""
     from agents.evaluate.metrics import DIRECTION, METRIC_LABELS
-    from agents.training.pipeline import CURVE_KEYS
+    from agents.training.curves import CURVE_KEYS
     from agents.training.vec_env import LOGGED_METRICS
     from marl_vertiport import vertiport_v0
     from marl_vertiport.sim.metrics import METRICS, TRAINING_METRICS

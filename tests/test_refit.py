@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from agents.controllers.gcn import GCNController
-from agents.training.pipeline import TrainConfig, train
+from agents.training.config import TrainConfig
+from agents.training.pipeline import train
 from agents.studies.refit import main, refit
 from marl_vertiport.config import build_dataclass, to_dict
 

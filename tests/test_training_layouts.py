@@ -10,7 +10,8 @@ import torch
 from tensordict import TensorDict
 
 from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
-from agents.training.pipeline import TrainConfig, runner_config
+from agents.training.config import TrainConfig
+from agents.training.runner import runner_config
 from agents.training.vec_env import MultiAgentVecEnv
 from marl_vertiport.config import ConfigError, build_dataclass, to_dict
 
@@ -161,7 +162,7 @@ def test_single_agent_copies_cycle_scenarios_with_the_same_spaces():
 def test_critic_ablation_configs_differ_from_scratch_only_in_what_they_ablate():
     """(b) and (c) of the centralised-critic study extend scratch.yaml (``base:``) and change
     only the critic's input or the mode, so the three runs share every other setting."""
-    from agents.training.pipeline import load_train_config
+    from agents.training.config import load_train_config
 
     scratch = to_dict(load_train_config("scratch"))
     for name, changed in [("scratch_independent", {"critic": "observation"}),
@@ -175,7 +176,7 @@ def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm
     default distils an ensemble of fits before PPO, single_fit.yaml is the default without
     that stage, and ppo_stage/sharpened.yaml keeps single_fit's warm start (its PPO stage alone
     differs), as it was measured."""
-    from agents.training.pipeline import TRAIN_CONFIG_DIR, load_train_config
+    from agents.training.config import TRAIN_CONFIG_DIR, load_train_config
 
     files = sorted(TRAIN_CONFIG_DIR.rglob("*.yaml"))
     assert len(files) >= 8
@@ -189,3 +190,27 @@ def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm
     for key in ("pretrain", "model", "scenarios", "seed", "lost_vehicle_penalty", "mode", "ensemble"):
         assert stage[key] == single[key], key
     assert stage["warm_start_temperature"] == 0.3 and default["warm_start_temperature"] == 1.0
+
+
+def test_the_models_and_the_algorithm_are_named_in_the_train_config(tmp_path):
+    """rsl_rl builds the classes the config names (``model.*_class``, ``algorithm.class_name``);
+    a model of one's own plugs in by name, and the GCN controller refuses a checkpoint of an
+    actor class it does not play, without importing it."""
+    import torch
+
+    from agents.controllers.gcn import CheckpointError, GCNController
+    from agents.controllers.registry import SHIPPED_CHECKPOINT
+
+    cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()), "model": {
+        "actor_class": "agents.gcn.models:GraphActor", "critic_class": "tests.my_models:Critic",
+        "distribution_class": "agents.gcn.distribution:MaskedCategorical"}})
+    rc = runner_config(cfg)
+    assert rc["critic"]["class_name"] == "tests.my_models:Critic"
+    assert rc["actor"]["class_name"] == "agents.gcn.models:GraphActor"
+    assert rc["actor"]["distribution_cfg"]["class_name"] == "agents.gcn.distribution:MaskedCategorical"
+    assert rc["algorithm"]["class_name"] == "agents.training.ppo:WarmupPPO"
+    content = torch.load(SHIPPED_CHECKPOINT, weights_only=True)
+    model = content["infos"]["marl_vertiport"]["train_config"]["model"]
+    model["actor_class"] = "os:system"
+    with pytest.raises(CheckpointError, match="trained with the actor class os:system"):
+        GCNController(content)

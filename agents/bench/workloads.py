@@ -581,7 +581,8 @@ def bench_training(iterations: int) -> dict[str, Any]:
     """``make train``'s config for a few PPO iterations (no warm start), in a fresh process."""
     code = (
         "import time, torch, json\n"
-        "from agents.training.pipeline import load_train_config, make_vec_env, runner_config\n"
+        "from agents.training.config import load_train_config\n"
+        "from agents.training.runner import make_vec_env, runner_config\n"
         "from rsl_rl.runners import OnPolicyRunner\n"
         "cfg = load_train_config('default'); torch.set_num_threads(cfg.torch_threads)\n"
         "env = make_vec_env(cfg)\n"

@@ -111,7 +111,7 @@ def checkpoint_of(path: str) -> str:
     """A checkpoint file, or a training run's folder (its last checkpoint)."""
     given = Path(path)
     if given.is_dir():
-        from agents.training.pipeline import latest_checkpoint
+        from agents.training.checkpoints import latest_checkpoint
 
         found = latest_checkpoint(given)
         if found is None:
@@ -333,7 +333,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     candidate = args.checkpoint
     try:
         if candidate is None:
-            from agents.training.pipeline import load_train_config, train
+            from agents.training.config import load_train_config
+            from agents.training.pipeline import train
             from marl_vertiport.config import build_dataclass, to_dict
 
             train_cfg = load_train_config(cfg.train_config)

@@ -22,6 +22,11 @@ from agents.gcn.padding import to_tensordict
 from marl_vertiport.sim.schema import ActionLayout
 
 
+#: The actor class whose checkpoints the GCN controller plays (``model.actor_class`` of a train
+#: config; older checkpoints, which do not name one, were made with it).
+GRAPH_ACTOR = "agents.gcn.models:GraphActor"
+
+
 class CheckpointError(ValueError):
     """A file that is not a usable marl_vertiport checkpoint, or one that does not fit the env."""
 
@@ -69,10 +74,9 @@ class GCNController(Controller):
 
     def __init__(self, path: str | Path | dict[str, Any], deterministic: bool = True,
                  seed: int | None = None) -> None:
-        from agents.gcn.models import GraphActor
         from agents.gcn.features import feature_names
-        from marl_vertiport.config import from_dict
-        from marl_vertiport.vertiport_v0 import raw_env
+        from agents.gcn.models import GraphActor
+        from agents.gcn.padding import example_observation
 
         # One intra-op thread: a single-observation forward pass is mostly overhead, and
         # evaluation runs one process per core.
@@ -90,12 +94,13 @@ class GCNController(Controller):
                 f"checkpoint {self.path} was trained on observation features "
                 f"{meta.get('feature_schema', '(not recorded: a fixed-size model of format 1)')}, "
                 f"this version observes {schema}; retrain it (make train)")
-        env_cfg = from_dict(meta["env_config"])
         model = meta["train_config"]["model"]
-        probe = raw_env(config=env_cfg)
-        probe.reset(seed=0)
-        example = self._tensors(probe.observe(probe.possible_agents[0]))
-        probe.close()
+        actor_class = model.get("actor_class", GRAPH_ACTOR)
+        if actor_class != GRAPH_ACTOR:
+            # The class is not imported: a file must never name code that loading it runs.
+            raise CheckpointError(f"checkpoint {self.path} was trained with the actor class "
+                                  f"{actor_class}; this controller plays {GRAPH_ACTOR} checkpoints")
+        example = example_observation()
         self.feature_counts = {"port_nodes": len(schema["ports"]), "evtol_nodes": len(schema["evtols"]),
                                "self": len(schema["extra"])}
         groups = {"actor": list(POLICY_GROUPS)}

@@ -65,7 +65,7 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
 
 def load_configs(names: Sequence[str], iterations: int | None) -> dict[str, dict]:
     """Each train config by its label (the file's stem), resolved and validated."""
-    from agents.training.pipeline import TrainConfig, load_train_config
+    from agents.training.config import TrainConfig, load_train_config
 
     configs = {}
     for name in names:

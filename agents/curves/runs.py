@@ -52,7 +52,9 @@ def train_seed(task: SeedTask) -> dict[str, Any]:
     """Train one seed (no end-of-run evaluation; the warm start, if any, runs in this
     process); returns ``{"rows": curves.csv rows, "seconds": wall time, "checkpoint": path}``."""
     from agents.execution import LocalBackend
-    from agents.training.pipeline import TrainConfig, read_curves, train
+    from agents.training.config import TrainConfig
+    from agents.training.curves import read_curves
+    from agents.training.pipeline import train
     from marl_vertiport.config import build_dataclass
 
     cfg = build_dataclass(TrainConfig, task.config)

@@ -93,3 +93,21 @@ def to_tensordict(arrays: dict[str, np.ndarray], batch_size: int, device: str | 
         tensor = torch.from_numpy(np.array(value, copy=True))
         data[key] = tensor.bool() if key in BOOL_GROUPS else tensor.float()
     return TensorDict(data, batch_size=[batch_size], device=device)
+
+
+def example_observation(kind: str = "observation") -> TensorDict:
+    """A batch of one zero observation with one vertiport node and one eVTOL, the groups a
+    graph model of ``kind`` reads (``"observation"``: the actor's three groups and its action
+    mask; ``"state"``: the centralised critic's). The models are size-agnostic, so this is all
+    they need to be built; no env is made."""
+    from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS, feature_names
+    from marl_vertiport.sim.schema import ActionLayout
+
+    names = feature_names(kind)
+    groups = POLICY_GROUPS if kind == "observation" else STATE_GROUPS
+    arrays = {groups[0]: np.zeros((1, 1, len(names["ports"])), np.float32),
+              groups[1]: np.zeros((1, 1, len(names["evtols"])), np.float32),
+              groups[2]: np.zeros((1, len(names["extra"])), np.float32)}
+    if kind == "observation":
+        arrays["action_mask"] = np.ones((1, ActionLayout(1).n), bool)
+    return to_tensordict(arrays, 1)

@@ -45,7 +45,8 @@ def refit(run_dir: str | Path, seeds: Sequence[int], out_dir: str | Path,
     from agents.controllers.gcn import GCNController, read_checkpoint
     from agents.training.ensemble import REFIT_SEED_BASE, refit_actor
     from agents.training.imitation import load_warm_start_state
-    from agents.training.pipeline import WARM_STATE, load_train_config
+    from agents.training.checkpoints import WARM_STATE
+    from agents.training.config import load_train_config
 
     run_dir, out_dir = Path(run_dir), Path(out_dir)
     for name in ("train_config.yaml", WARM_STATE, "model_warmstart.pt"):

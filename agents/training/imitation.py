@@ -319,7 +319,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                on_round: Callable[[dict[str, float]], None] | None = None,
                backend: Backend | None = None) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
-    docstring); ``cfg`` is the :class:`~agents.training.pipeline.TrainConfig`.
+    docstring); ``cfg`` is the :class:`~agents.training.config.TrainConfig`.
 
     ``env_config``: the env config, or a list of them (scenarios; days are padded to the
     largest vertiport and fleet of the list).

@@ -1,0 +1,35 @@
+"""What a run's checkpoints carry and where they are: the metadata every checkpoint holds (the
+configs, the feature schema its weights depend on), and the newest complete one of a run."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+from agents.gcn.features import feature_names
+from agents.training.config import TrainConfig, scenario_configs
+from marl_vertiport.config import to_dict
+
+CHECKPOINT_FORMAT = 2  # 2: size-agnostic models, the feature schema in the metadata
+#: The warm start's progress in a run folder (agents/training/imitation.py).
+WARM_STATE = "warmstart_state.pt"
+
+
+def checkpoint_infos(cfg: TrainConfig, env_cfg) -> dict[str, Any]:
+    """Run metadata stored in every checkpoint: the configs and the actor's feature schema
+    (the column names its weights depend on; layout and fleet sizes do not matter)."""
+    return {"marl_vertiport": {"format": CHECKPOINT_FORMAT, "mode": cfg.mode,
+                               "train_config": to_dict(cfg), "env_config": to_dict(env_cfg),
+                               "scenarios": [c.name for c in scenario_configs(cfg)],
+                               "feature_schema": feature_names("observation")}}
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    """The complete checkpoint with the highest iteration in a run folder (temp files ignored)."""
+    found = []
+    for path in run_dir.glob("model_*.pt"):
+        m = re.fullmatch(r"model_(\d+)\.pt", path.name)
+        if m:
+            found.append((int(m.group(1)), path))
+    return max(found)[1] if found else None

@@ -1,0 +1,249 @@
+"""The train config's schema (``configs/train/*.yaml``): every key with its default, and the
+checks that name a bad one (docs/training.md, "Configs")."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agents.controllers.gcn import GRAPH_ACTOR
+from agents.training.imitation import TEACHERS
+from agents.training.vec_env import CRITIC_INPUTS, ROW_LAYOUTS
+from marl_vertiport.config import ConfigError, load_config, load_yaml_dataclass
+
+TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
+
+
+@dataclass(frozen=True)
+class PretrainConfig:
+    """Warm start of the actor by imitation (agents/training/imitation.py)."""
+
+    days: int = 0
+    """Days of demonstrations per round (0: no warm start)."""
+    day_steps: int = 1440
+    """Steps of each demonstration day (a full day: 1440)."""
+    starts: int = 0
+    """Extra episodes per round that cover only the start of a day."""
+    start_steps: int = 120
+    """Steps of each of those episodes."""
+    teacher: str = "rollout"
+    """``rollout`` (the look-ahead planner) or ``heuristic`` (the expert dispatcher)."""
+    rollout_horizon: int = 40
+    """Steps the rollout teacher simulates per candidate action."""
+    rollout_margin: float = 3.0
+    """Reward by which the rollout teacher's best action must beat the dispatcher's to be the
+    label (near-ties keep the dispatcher's choice, which is easier to learn)."""
+    workers: int = 2
+    """Processes that run demonstration days."""
+    epochs: int = 6
+    """Passes over the demonstrations after each round."""
+    regret_cap: float = 0.0
+    """Weights of the imitation loss: 1 + the teacher's value spread over the candidates,
+    capped at this (0: every decision weighs 1); see ``imitation.label_weights``."""
+    batch_size: int = 1024
+    learning_rate: float = 1e-3
+    dagger_rounds: int = 0
+    """Rounds of DAgger after behaviour cloning: the actor drives, the teacher labels."""
+    noise: float = 0.0
+    """Probability that the driver's action at a step with a choice of a day start is replaced
+    by a uniformly drawn legal action (the label stays the teacher's): the data then covers the
+    states just off the driver's path, from which it must recover (noise injection, as in
+    DART). The full days, which also score the fits, run without it."""
+    low_battery_starts: int = 0
+    """Extra day starts per round in which every battery begins low, cycling through
+    ``low_battery_pct``: the teacher shows what to do when a charge cannot be had for all."""
+    low_battery_pct: tuple[float, ...] = (10.0, 20.0, 30.0, 45.0)
+    """Initial battery levels (%) of those starts."""
+
+
+@dataclass(frozen=True)
+class AlgorithmConfig:
+    """rsl_rl PPO arguments (same names)."""
+
+    class_name: str = "agents.training.ppo:WarmupPPO"
+    """The algorithm rsl_rl builds (``module:Class``): rsl_rl's ``PPO`` with a critic warm-up
+    and a linear learning-rate schedule (agents/training/ppo.py)."""
+    learning_rate: float = 1e-4
+    gamma: float = 0.99
+    lam: float = 0.95
+    entropy_coef: float = 0.001
+    clip_param: float = 0.1
+    num_learning_epochs: int = 4
+    num_mini_batches: int = 4
+    value_loss_coef: float = 1.0
+    max_grad_norm: float = 1.0
+    schedule: str = "adaptive"
+    """``adaptive`` (rsl_rl: the rate follows the KL divergence toward ``desired_kl``),
+    ``fixed``, or ``linear`` (decays linearly to 0 over the run's iterations)."""
+    desired_kl: float = 0.01
+    use_clipped_value_loss: bool = True
+    """rsl_rl's value clipping: a value may move at most ``clip_param`` (in reward units) from
+    its rollout estimate in an update; with returns of hundreds it all but stops the critic."""
+    normalize_advantage_per_mini_batch: bool = False
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """The networks rsl_rl builds, named as ``module:Class`` (rsl_rl's ``class_name``), and
+    their sizes."""
+
+    actor_class: str = GRAPH_ACTOR
+    """The shared actor: an rsl_rl ``MLPModel`` that reads the three observation groups. The GCN
+    controller plays checkpoints of ``GraphActor`` only (it never imports a class a file names)."""
+    critic_class: str = "agents.gcn.models:GraphCritic"
+    """The critic (the centralised one reads ``state()``'s groups)."""
+    distribution_class: str = "agents.gcn.distribution:MaskedCategorical"
+    """The actor's output distribution (legal actions only)."""
+    hidden: int = 64
+    """Width of the GCN layers."""
+    hidden_dims: tuple[int, ...] = (128, 64)
+    """MLP head (the paper: 128-64)."""
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    episodes: int = 20
+    """Held-out episodes per case for the evaluation at the end of training (0: none)."""
+    agents: tuple[str, ...] = ("random", "fcfs", "heuristic")
+    """Baselines evaluated beside the learned policy."""
+
+
+@dataclass(frozen=True)
+class EnsembleConfig:
+    """Distillation of an ensemble of imitation fits after the warm start
+    (agents/training/ensemble.py)."""
+
+    fits: int = 0
+    """Refits of the warm start's demonstrations from fresh weights; with the warm start they
+    form the ensemble (0: no ensemble stage)."""
+    days: int = 10
+    """Full training days the ensemble drives; their states join the demonstrations."""
+    epochs: int = 8
+    """Passes of the distillation over those states and the demonstrations."""
+    batch_size: int = 256
+    learning_rate: float = 3e-4
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    mode: str = "multi_agent"
+    """``multi_agent`` (AEC, one row per eVTOL, critic on ``state()``) or ``single_agent``."""
+    env_config: str = "paper"
+    """The env config of the run (the end-of-training evaluation's first case)."""
+    scenarios: tuple[str, ...] = ()
+    """Env configs to train across (multi-agent mode): PPO's copies and the warm start's days
+    cycle through them. Empty: ``env_config`` alone."""
+    lost_vehicle_penalty: float = 0.0
+    """Subtracted from the reward the learner sees for each vehicle lost in a step (stranded
+    in the air or on the ground); the warm start scores its fits the same way. Evaluation
+    reports the paper's reward. 0: the paper's reward."""
+    num_envs: int = 32
+    num_steps_per_env: int = 32
+    iterations: int = 250
+    save_interval: int = 10
+    seed: int = 0
+    device: str = "cpu"
+    """``cpu`` or ``cuda`` / ``cuda:0`` where a GPU is present."""
+    torch_threads: int = 1
+    """Intra-op threads; tiny graph batches run fastest on one."""
+    team_reward: bool = True
+    """Multi-agent mode: every eVTOL's row gets the step's reward (cooperative); False credits
+    only the acting eVTOL (per-agent returns, which reward selfish use of the charger)."""
+    rows: str = "agents"
+    """Multi-agent mode: ``agents`` (a row per env copy and eVTOL; the rows whose eVTOL has no
+    turn only "stay") or ``turns`` (a row per copy: the eVTOL whose turn it is); see
+    agents/training/vec_env.py."""
+    critic: str = "state"
+    """Multi-agent mode: ``state`` (the centralised critic reads ``state()``) or
+    ``observation`` (each eVTOL's critic reads its own observation, shared weights). The
+    single-agent mode's critic always reads the observation."""
+    conflict_penalty: float = 0.0
+    """Subtracted from the reward the learner sees in a step whose acting eVTOL was in a
+    predicted conflict and did not avoid it (the paper's S = -5, counted as a collision);
+    evaluation reports the paper's reward. 0: none."""
+    reward_scale: float = 1.0
+    """The learner's reward (after the penalties) is multiplied by this; metrics and
+    evaluation keep the paper's reward."""
+    critic_warmup_iterations: int = 0
+    """First PPO iterations with the actor frozen, so that the critic fits the warm-started
+    policy before its advantages move the actor."""
+    warm_start_temperature: float = 1.0
+    """Before PPO, the warm-started actor's logits are divided by this for good (its output
+    layers scaled, see :meth:`GraphActor.sharpen`): below 1 the policy PPO samples, and so
+    improves, comes closer to the greedy policy that is deployed. The greedy actions stay
+    those of the warm start. 1: as imitated."""
+    pretrain: PretrainConfig = field(default_factory=PretrainConfig)
+    ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
+    algorithm: AlgorithmConfig = field(default_factory=AlgorithmConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.mode in ("multi_agent", "single_agent"), "mode", "multi_agent or single_agent"),
+            (self.num_envs >= 1, "num_envs", "must be >= 1"),
+            (self.num_steps_per_env >= 1, "num_steps_per_env", "must be >= 1"),
+            (self.iterations >= 1, "iterations", "must be >= 1"),
+            (self.save_interval >= 1, "save_interval", "must be >= 1"),
+            (self.torch_threads >= 1, "torch_threads", "must be >= 1"),
+            (self.algorithm.learning_rate > 0, "algorithm.learning_rate", "must be > 0"),
+            (0 <= self.algorithm.gamma <= 1, "algorithm.gamma", "must lie in [0, 1]"),
+            (self.algorithm.schedule in ("adaptive", "fixed", "linear"), "algorithm.schedule",
+             "adaptive, fixed or linear"),
+            (self.rows in ROW_LAYOUTS, "rows", " or ".join(ROW_LAYOUTS)),
+            (self.critic in CRITIC_INPUTS, "critic", " or ".join(CRITIC_INPUTS)),
+            (self.rows == "agents" or self.team_reward, "rows",
+             "turns holds one stream of turns per copy: it needs team_reward: true"),
+            (self.reward_scale > 0 and math.isfinite(self.reward_scale), "reward_scale",
+             "must be a finite number > 0"),
+            (self.conflict_penalty >= 0, "conflict_penalty", "must be >= 0"),
+            (self.warm_start_temperature > 0 and math.isfinite(self.warm_start_temperature),
+             "warm_start_temperature", "must be a finite number > 0"),
+            (self.warm_start_temperature == 1.0
+             or (self.pretrain.days > 0 and self.pretrain.epochs > 0), "warm_start_temperature",
+             "sharpens the warm start: it needs pretrain.days and pretrain.epochs > 0"),
+            (self.ensemble.fits >= 0, "ensemble.fits", "must be >= 0"),
+            (self.ensemble.fits == 0 or (self.pretrain.days > 0 and self.pretrain.epochs > 0),
+             "ensemble.fits", "refits the warm start: it needs pretrain.days and pretrain.epochs > 0"),
+            (self.ensemble.days >= 1 and self.ensemble.epochs >= 1 and self.ensemble.batch_size >= 1,
+             "ensemble", "days, epochs and batch_size must be >= 1"),
+            (self.ensemble.learning_rate > 0, "ensemble.learning_rate", "must be > 0"),
+            (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
+             "pretrain", "days, epochs and dagger_rounds must be >= 0"),
+            (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
+            (self.pretrain.starts >= 0 and self.pretrain.start_steps >= 1, "pretrain.starts",
+             "starts must be >= 0 and start_steps >= 1"),
+            (self.pretrain.teacher in TEACHERS, "pretrain.teacher", f"one of {', '.join(TEACHERS)}"),
+            (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
+            (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
+            (self.pretrain.regret_cap >= 0, "pretrain.regret_cap", "must be >= 0"),
+            (self.pretrain.days + self.pretrain.starts + self.pretrain.low_battery_starts <= 100,
+             "pretrain", "days + starts + low_battery_starts must be <= 100 (seeds of a round)"),
+            (0.0 <= self.pretrain.noise < 1.0, "pretrain.noise", "must lie in [0, 1)"),
+            (self.pretrain.low_battery_starts >= 0, "pretrain.low_battery_starts", "must be >= 0"),
+            (len(self.pretrain.low_battery_pct) > 0
+             and all(0.0 < b <= 100.0 for b in self.pretrain.low_battery_pct),
+             "pretrain.low_battery_pct", "a non-empty list of levels in (0, 100]"),
+            (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
+            (self.lost_vehicle_penalty >= 0, "lost_vehicle_penalty", "must be >= 0"),
+            (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),
+        ]
+        for ok, name, msg in checks:
+            if not ok:
+                raise ConfigError(f"{name}: {msg}")
+
+
+def load_train_config(config: str | Path) -> TrainConfig:
+    """A name in ``configs/train/`` or a YAML path."""
+    return load_yaml_dataclass(TrainConfig, config, TRAIN_CONFIG_DIR, "train config")
+
+
+def load_train_config(config: str | Path) -> TrainConfig:
+    """A name in ``configs/train/`` or a YAML path."""
+    return load_yaml_dataclass(TrainConfig, config, TRAIN_CONFIG_DIR, "train config")
+
+
+def scenario_configs(cfg: TrainConfig) -> list:
+    """The env configs a run trains on (``scenarios``, or ``env_config`` alone), loaded."""
+    return [load_config(name) for name in (cfg.scenarios or (cfg.env_config,))]
