@@ -7,8 +7,6 @@ import json
 import subprocess
 from pathlib import Path
 
-import pytest
-
 from agents.common import provenance as prov
 from agents.controllers.registry import SHIPPED_CHECKPOINT
 

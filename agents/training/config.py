@@ -239,11 +239,6 @@ def load_train_config(config: str | Path) -> TrainConfig:
     return load_yaml_dataclass(TrainConfig, config, TRAIN_CONFIG_DIR, "train config")
 
 
-def load_train_config(config: str | Path) -> TrainConfig:
-    """A name in ``configs/train/`` or a YAML path."""
-    return load_yaml_dataclass(TrainConfig, config, TRAIN_CONFIG_DIR, "train config")
-
-
 def scenario_configs(cfg: TrainConfig) -> list:
     """The env configs a run trains on (``scenarios``, or ``env_config`` alone), loaded."""
     return [load_config(name) for name in (cfg.scenarios or (cfg.env_config,))]

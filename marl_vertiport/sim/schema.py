@@ -33,6 +33,11 @@ ON_PORT, ON_CHARGER, HOVERING, TAXIING, DEPARTING, AWAY, ARRIVING, OUT_OF_SERVIC
     int(s) for s in Status)
 #: Status names by code (``STATUS_NAMES[HOVERING] == "hovering"``).
 STATUS_NAMES = tuple(s.name.lower() for s in Status)
+#: By status code (indexed by a Python int on hot paths): in the air, so a flat battery is a
+#: depletion in flight.
+AIRBORNE = (False, False, True, True, True, True, True, False)
+#: By status code: flying inside the airspace, so in the ATC's conflict probe.
+IN_TRANSIT_INSIDE = (False, False, False, True, True, False, True, False)
 
 # Schedule status codes (feature ``schedule_status``).
 EARLY, ON_TIME, DELAYED = -1, 0, 1

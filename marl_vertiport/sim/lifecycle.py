@@ -1,0 +1,203 @@
+"""A vehicle's life through the day, as the ATC's clearances and its own flight move it along:
+taxiing between nodes, departure to the airspace boundary and on to its destination, the return
+and the re-entry, the hover spot it is sent to (or the hold at the boundary while none is free),
+the avoidance manoeuvre (a climb to a free avoidance layer, paper section II-C), landing and the
+next flight plan, and the emergency landing of a vehicle whose battery is empty in the air
+(out of service for the rest of the day, set down clear of every vehicle on the ground).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from marl_vertiport.sim.energy import local_route
+from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT
+from marl_vertiport.sim.schema import (
+    ARRIVING, AWAY, DEPARTING, HOVERING, NO_OPERATION, ON_CHARGER, ON_PORT, OUT_OF_SERVICE,
+    PENDING_LANDING, PENDING_TAKEOFF, TAXIING,
+)
+
+
+class Lifecycle:
+    """Node occupancy, routes and status changes of :class:`~marl_vertiport.sim.core.VertiportSim`
+    (a part of it: the state it changes is the simulator's)."""
+
+    def _occupy(self, v: int, node: int) -> None:
+        self.node[v] = node
+        self.node_occupant[node] = v
+
+    def _release(self, v: int) -> None:
+        node = self.node[v]
+        if node >= 0 and self.node_occupant[node] == v:
+            self.node_occupant[node] = -1
+        self.node[v] = -1
+
+    def _set_route(self, v: int, waypoints: list[np.ndarray], leg_alt_m: float) -> None:
+        self.target[v] = waypoints[0]
+        self.routes[v] = list(waypoints[1:])
+        self.has_target[v] = True
+        self.leg_alt[v] = leg_alt_m
+
+    def _local_route(self, v: int, node: int) -> list[np.ndarray]:
+        """Route at hover altitude from the vehicle to vertiport node ``node``."""
+        return local_route(self.pos[v], self._node_pos[node], self.cfg.flight.hover_altitude_m)
+
+    def _complete_operation(self, v: int, now: float) -> None:
+        self.completed_delay[v] += self.schedule.lateness_min(now, self.pending_time.item(v))
+        self.pending_kind[v] = NO_OPERATION
+        self.delay[v] = 0.0
+
+    def _start_departure(self, v: int) -> None:
+        alt = self.cfg.flight.transit_altitude_m
+        x, y, _ = self.pos[v]
+        dest_xy = self.layout.destination_xy_m[self.dest[v]]
+        exit_xy = self.layout.boundary_point(self.pos[v, :2], dest_xy)
+        self._release(v)
+        self.status[v] = DEPARTING
+        self._set_route(v, [np.array([x, y, alt]), np.array([exit_xy[0], exit_xy[1], alt])], alt)
+        self.physics.make_dynamic(v)
+
+    def _avoid(self, v: int) -> None:
+        """Climb to the lowest avoidance layer no other vehicle uses and fly the rest of the
+        leg there. Hold position for this step instead when no horizontal travel is left (the
+        final descent onto a spot) or when every layer is taken."""
+        if self.avoid_layer[v] >= 0 or not self.has_target[v]:
+            return
+        waypoints = [self.target[v]] + self.routes[v]
+        horizontal = [w for w in waypoints if np.hypot(*(w[:2] - self.pos[v, :2])) > 1e-9]
+        used = set(self.avoid_layer[self.avoid_layer >= 0].tolist())
+        layers = self.cfg.flight.avoid_altitudes_m
+        free = [k for k in range(len(layers)) if k not in used]
+        if not free or not horizontal:
+            # The route resumes next step from where the vehicle holds now.
+            self.routes[v].insert(0, self.target[v].copy())
+            self.target[v] = self.pos[v].copy()
+            return
+        k = free[0]
+        alt = layers[k]
+        self.avoid_layer[v] = k
+        final = waypoints[-1]
+        new_route = [np.array([self.pos[v, 0], self.pos[v, 1], alt])]
+        for w in horizontal:
+            new_route.append(np.array([w[0], w[1], alt]))
+        if abs(final[2] - alt) > 1e-9 and self.status[v] != DEPARTING:
+            new_route.append(final.copy())
+        # Drop duplicates created by the rewrite (consecutive equal waypoints).
+        route = [new_route[0]]
+        for w in new_route[1:]:
+            if np.any(np.abs(w - route[-1]) > 1e-9):
+                route.append(w)
+        self._set_route(v, route, alt)
+
+    def _finish_leg(self, v: int) -> int:
+        s = self.status[v]
+        lay, cfg = self.layout, self.cfg
+        self.avoid_layer[v] = -1
+        if s == TAXIING or s == ARRIVING:
+            node = self.node[v]
+            self.pos[v] = self._node_pos[node]
+            self.physics.make_static(v, self.pos[v])
+            if lay.node_type[node] == HOVER_SPOT:
+                self.status[v] = HOVERING
+                return 0
+            self.status[v] = ON_CHARGER if lay.node_type[node] == CHARGING_PORT else ON_PORT
+            if self.landing_cleared[v]:
+                self.landing_cleared[v] = False
+                self.pending_kind[v] = PENDING_TAKEOFF
+                self.pending_time[v] = self.schedule.takeoff_after_landing_min(
+                    self.rng, self.minute + self.minutes_per_step)
+                self.dest[v] = int(self.rng.integers(len(lay.destination_xy_m)))
+                self.metrics.completed_trips += 1
+                return 1
+            return 0
+        if s == DEPARTING:
+            self.status[v] = AWAY
+            self.returning[v] = False
+            self.physics.make_absent(v)
+            d = lay.destination_xy_m[self.dest[v]]
+            self._set_route(v, [np.array([d[0], d[1], self.pos[v, 2]])], self.pos[v, 2])
+            return 0
+        if s == AWAY and not self.returning[v]:
+            self.returning[v] = True
+            entry = lay.boundary_point(np.zeros(2), self.pos[v, :2])
+            # Aim slightly inside the boundary so the re-entry is unambiguous.
+            entry = entry * (1.0 - 1e-3)
+            alt = cfg.flight.transit_altitude_m
+            self._set_route(v, [np.array([entry[0], entry[1], alt])], alt)
+            return 0
+        if s == AWAY:
+            self.status[v] = ARRIVING
+            self.returning[v] = False
+            self.pending_kind[v] = PENDING_LANDING
+            self.pending_time[v] = self.schedule.landing_min(self.minute + self.minutes_per_step)
+            self.physics.make_static(v, self.pos[v])
+            self._assign_hover_spot(v)
+            return 0
+        return 0
+
+    def _assign_hover_spot(self, v: int) -> None:
+        """Send an arriving vehicle to the free hover spot nearest to it, or hold it."""
+        lay = self.layout
+        free = np.flatnonzero((lay.node_type == HOVER_SPOT) & (self.node_occupant == -1))
+        if free.size == 0:
+            self._holding.add(v)  # holds at the boundary until a spot frees up
+            return
+        self._holding.discard(v)
+        d = np.linalg.norm(lay.node_xy_m[free] - self.pos[v, :2], axis=1)
+        node = int(free[np.argmin(d)])
+        self._occupy(v, node)
+        alt = self.cfg.flight.transit_altitude_m
+        nx, ny = lay.node_xy_m[node]
+        self._set_route(v, [np.array([nx, ny, alt]), self._node_pos[node].copy()], alt)
+        self.physics.make_dynamic(v)
+
+    def _take_out_of_service(self, v: int) -> None:
+        """Battery depleted in the air: emergency landing where it is, out of service for the
+        rest of the day. If it comes down within two vehicle sizes of a free port it takes the
+        nearest such port, so nothing lands on top of it; it never comes down on or inside a
+        vehicle on the ground (:meth:`_clear_landing_xy`). A late
+        operation it leaves undone keeps its lateness (at the end of this step) in the metrics."""
+        if self.pending_kind[v] != NO_OPERATION:
+            self.completed_delay[v] += self.schedule.lateness_min(
+                self.minute + self.minutes_per_step, self.pending_time.item(v))
+        self.has_target[v] = False
+        self.routes[v] = []
+        self.avoid_layer[v] = -1
+        self.landing_cleared[v] = False
+        self.pending_kind[v] = NO_OPERATION
+        self._release(v)
+        inside = self.status[v] != AWAY
+        self.status[v] = OUT_OF_SERVICE
+        if inside:
+            self.pos[v, 2] = self.park_z_m
+            d = np.linalg.norm(self.layout.node_xy_m - self.pos[v, :2], axis=1)
+            near = np.flatnonzero((d < self.cfg.flight.vehicle_size_m * 2) & self._is_port
+                                  & (self.node_occupant == -1))
+            if near.size:
+                self._occupy(v, int(near[np.argmin(d[near])]))
+            self.pos[v, :2] = self._clear_landing_xy(v)
+            self.physics.make_static(v, self.pos[v])
+
+    def _clear_landing_xy(self, v: int) -> np.ndarray:
+        """Where vehicle ``v`` comes down in an emergency landing: straight below it, or, when
+        that would put it within touching distance of a vehicle on the ground, the nearest point
+        clear of all of them (on rings of one touching distance around it, 12 bearings each,
+        inside the airspace), so that it never lands on or inside another vehicle."""
+        here = self.pos[v, :2].copy()
+        grounded = [u for u in range(self.n) if u != v and self.pos[u, 2] <= self.park_z_m + 1e-6
+                    and self.status[u] != AWAY]
+        if not grounded:
+            return here
+        others = self.pos[grounded, :2]
+        clear = self._touch_m
+        if np.linalg.norm(others - here, axis=1).min() >= clear:
+            return here
+        radius = self.layout.airspace_radius_m
+        bearings = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+        for ring in range(1, 4 * self.n + 2):
+            points = here + ring * clear * np.column_stack([np.cos(bearings), np.sin(bearings)])
+            ok = (np.linalg.norm(points[:, None] - others[None], axis=2).min(axis=1) >= clear) \
+                & (np.linalg.norm(points, axis=1) < radius)
+            if ok.any():
+                return points[np.flatnonzero(ok)[0]]
+        return here  # pragma: no cover - a full airspace; cannot happen with a valid layout
