@@ -26,7 +26,7 @@ ITERATIONS ?=
 BACKEND  ?= local
 RUN_ON    = --backend $(BACKEND)
 
-.PHONY: help venv test test-fast check-results fuzz soak train check-train check-train-margin curves evaluate sweep results render bench env-demo clean
+.PHONY: help venv test test-fast check-results fuzz soak train check-train check-train-margin curves evaluate sweep results render bench bench-compare env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-18s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -98,6 +98,9 @@ render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/
 
 bench: $(STAMP)  ## measure env, physics, vector, inference and training speed (docs/performance.md)
 	$(CLI) bench --out runs/bench --report docs/performance.md
+
+bench-compare: $(STAMP)  ## the env under the dispatcher's traffic here and in the checkout BASE=path (a git worktree of another commit): medians of 5 interleaved replays and their ratio
+	$(PY) -m agents.bench.compare --base $(BASE)
 
 env-demo: $(STAMP)  ## run one day of the env with random legal actions and print its metrics
 	$(CLI) demo --config $(CONFIG)

@@ -102,7 +102,7 @@ def _hold_obs(batteries: list[float], statuses: list[int], free_nodes: set[int],
     the dispatcher's holding rules: vehicle 0 acts; ``nodes`` gives each vehicle's node."""
     env = vertiport_v0.env(config="paper")
     env.reset(seed=0)
-    positions = env.unwrapped.sim.port_nodes()[:, 2:]
+    positions = env.unwrapped.sim.port_features()[:, 2:]
     env.close()
     obs = make_obs([{"status": s, "battery": b} for s, b in zip(statuses, batteries)], 0, free_nodes)
     obs["observation"]["port_nodes"][:, 2:] = positions
@@ -143,7 +143,7 @@ def test_holding_moves_keep_clear_of_the_ports():
     # 3, whose path keeps clear (or stays if there is no such spot).
     env = vertiport_v0.env(config="paper")
     env.reset(seed=0)
-    xy = env.unwrapped.sim.port_nodes()[:, 2:]
+    xy = env.unwrapped.sim.port_features()[:, 2:]
     env.close()
     a, b, charger = xy[4], xy[5], xy[2]
     t = np.clip((charger - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)

@@ -182,3 +182,51 @@ def test_api_edges_get_clear_errors():
         env.step(0)
     assert env.unwrapped.sim.minute == minute  # nothing simulated after the end
     env.close()
+
+
+def test_one_observation_path_for_one_vehicle_and_for_rows_of_them():
+    """ObservationBuilder.observe (both envs) and observe_into / state_into (the training
+    vector env) build the same graphs: row r of a batch is vehicle r's observation, a row of no
+    vehicle (-1) has the graphs without is_self and its own features untouched, and the state
+    rows differ from state() only in whom is_self marks."""
+    from marl_vertiport.sim.schema import EVTOL_FEATURES, SELF_FEATURES
+    from marl_vertiport.spaces import ObservationBuilder
+
+    env = vertiport_v0.env(config="paper_uncertain")
+    env.reset(seed=4)
+    for _ in range(37):  # into the day: vehicles flying, noise drawn
+        obs = env.observe(env.agent_selection)
+        env.step(int(np.flatnonzero(obs["action_mask"])[0]))
+    sim = env.unwrapped.sim
+    builder = ObservationBuilder(sim)
+    n, p = sim.n, sim.layout.n_nodes
+    observers = [2, 0, -1, 3, 1]
+    ports = np.full((5, p + 2, 4), 7.0, np.float32)
+    evtols = np.full((5, n + 1, len(EVTOL_FEATURES)), 7.0, np.float32)
+    own = np.full((5, len(SELF_FEATURES)), 7.0, np.float32)
+    builder.observe_into(observers, ports, evtols, own)
+    is_self = EVTOL_FEATURES.index("is_self")
+    for row, v in enumerate(observers):
+        assert (ports[row, p:] == 7.0).all() and (evtols[row, n:] == 7.0).all()  # padding kept
+        if v < 0:
+            assert (evtols[row, :n, is_self] == 0).all() and (own[row] == 7.0).all()
+            continue
+        single = env.observe(f"evtol_{v}")["observation"]
+        np.testing.assert_array_equal(ports[row, :p], single["port_nodes"])
+        np.testing.assert_array_equal(evtols[row, :n], single["evtol_nodes"])
+        np.testing.assert_array_equal(own[row], single["self"])
+    state = env.state()
+    st_ports = np.zeros((5, p, 5), np.float32)
+    st_evtols = np.zeros((5, n, state["evtol_nodes"].shape[-1]), np.float32)
+    clock = np.zeros((5, 3), np.float32)
+    builder.state_into(observers, st_ports, st_evtols, clock)
+    for row, v in enumerate(observers):
+        expected = state["evtol_nodes"].copy()
+        expected[:, is_self] = 0.0
+        if v >= 0:
+            expected[v, is_self] = 1.0
+        np.testing.assert_array_equal(st_evtols[row], expected)
+        np.testing.assert_array_equal(st_ports[row], state["port_nodes"])
+        np.testing.assert_array_equal(clock[row], state["clock"])
+    # The simulator's cached graph features are read-only: an observation is always a copy.
+    assert not sim.evtol_features().flags.writeable and not sim.port_features().flags.writeable

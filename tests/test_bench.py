@@ -160,3 +160,19 @@ def test_replaying_a_controllers_recorded_actions_reproduces_its_days():
 
         replayed = run_aec_episode(env, Replay(), seed=31 + d)
         assert replayed == played and len(actions) == played["steps"]
+
+
+def test_compare_times_the_env_of_another_checkout_on_the_same_traffic(tmp_path):
+    """agents.bench.compare replays one recorded traffic through the env of each checkout in a
+    process of its own; against this very checkout the two sides run the same env."""
+    import json
+
+    from agents.bench.compare import main
+    from agents.common.provenance import REPO_ROOT
+
+    out = tmp_path / "compare.json"
+    assert main(["--base", str(REPO_ROOT), "--days", "1", "--repeats", "1", "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["steps"] > 1000 and len(result["runs"]["base"]) == len(result["runs"]["this"]) == 1
+    assert result["ratio"] > 0
+    assert main(["--base", str(tmp_path)]) == 2  # not a checkout: refused

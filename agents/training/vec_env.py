@@ -72,6 +72,7 @@ from agents.gcn.padding import from_padded_action, pad_action_mask, to_tensordic
 from agents.common.seeds import training_seed
 from marl_vertiport.config import EnvConfig, load_config
 from marl_vertiport.sim.schema import EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, ActionLayout
+from marl_vertiport.spaces import ObservationBuilder
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 
 #: The multi-agent row layouts and what its critic may read (the train config's ``rows`` and
@@ -211,42 +212,33 @@ class MultiAgentVecEnv(_VertiportVecEnv):
                 self._buf["evtol_valid"][c, :, : sim.n] = True
         self._noop_mask = np.zeros(a, np.int8)
         self._noop_mask[sims[0].actions.stay] = 1
-        self._eye = np.eye(n, dtype=np.float32)
-        self._is_self = EVTOL_FEATURES.index("is_self")
-        self._n_self = len(SELF_FEATURES)
+        self.builders = [ObservationBuilder(sim) for sim in sims]
+        self._turn_observer = np.zeros(1, np.intp)
+        self._agent_observers = [np.where(np.arange(r) < sim.n, np.arange(r), -1) for sim in sims]
         self._obs = self._observe_all()
 
     def _observe_copy(self, k: int) -> None:
-        env, buf = self.envs[k], self._buf
-        sim = env.sim
-        n, p, v = sim.n, sim.layout.n_nodes, sim.acting
-        state = sim.state_arrays() if self.with_state else None  # is_self marks the acting eVTOL
-        # The state's port columns 0-3 are the observation's port features; padded rows and
-        # the rows of absent eVTOLs stay zero.
-        buf["port_nodes"][k, :, :p] = (sim.port_nodes() if state is None
-                                       else state["port_nodes"][:, : buf["port_nodes"].shape[-1]])
-        base = sim._evtol_base()
-        evtol = buf["evtol_nodes"][k]
-        evtol[:, :n] = base
+        """Copy ``k``'s rows: through the env's observation builder (the one path from the
+        simulator to what a policy reads), padded rows left as they are."""
+        buf, builder = self._buf, self.builders[k]
+        sim = builder.sim
+        p, v = sim.layout.n_nodes, sim.acting
+        # Per row, the eVTOL it observes for; the rows of a copy's absent eVTOLs (-1) get the
+        # graphs alone.
+        observers = self._turn_observer if self.turn_rows else self._agent_observers[k]
+        if self.turn_rows:
+            observers[0] = v
+        builder.observe_into(observers, buf["port_nodes"][k], buf["evtol_nodes"][k], buf["self"][k])
         mask = pad_action_mask(sim.action_mask(v), p, self.max_nodes)
         if self.turn_rows:  # the one row is the acting eVTOL's
-            evtol[0, v, self._is_self] = 1.0
-            buf["self"][k, 0] = base[v, : self._n_self]
             buf["action_mask"][k, 0] = mask
         else:
-            evtol[:, :n, self._is_self] = self._eye[:, :n]
-            buf["self"][k, :n] = base[:, : self._n_self]
             masks = buf["action_mask"][k]
             masks[:] = self._noop_mask
             masks[v] = mask
-        if state is None:
-            return
-        buf["state_port_nodes"][k, :, :p] = state["port_nodes"]
-        st_evtol = buf["state_evtol_nodes"][k]
-        st_evtol[:, :n] = state["evtol_nodes"]
-        if not self.turn_rows:
-            st_evtol[:, :n, self._is_self] = self._eye[:, :n]
-        buf["state_clock"][k] = state["clock"]
+        if self.with_state:
+            builder.state_into(observers, buf["state_port_nodes"][k], buf["state_evtol_nodes"][k],
+                               buf["state_clock"][k])
 
     def _observe_all(self) -> TensorDict:
         for k in range(self.num_copies):

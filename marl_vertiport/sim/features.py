@@ -11,8 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from marl_vertiport.sim.schema import (
-    EVTOL_FEATURES, NO_OPERATION, SELF_FEATURES, STATE_EXTRA_FEATURES, STATE_PORT_FEATURES,
-    _IS_SELF,
+    EVTOL_FEATURES, NO_OPERATION, STATE_EXTRA_FEATURES, STATE_PORT_FEATURES, _IS_SELF,
 )
 
 
@@ -23,8 +22,9 @@ class Features:
         """-1 early, 0 on time, 1 delayed, per vehicle, shape ``(N,)``."""
         return self.schedule.status_codes(self.minute, self.pending_time, self.pending_kind)
 
-    def _evtol_base(self) -> np.ndarray:
-        """eVTOL node features ``(N, 13)`` float32 with ``is_self`` 0, cached until the next step.
+    def evtol_features(self) -> np.ndarray:
+        """The eVTOL graph's node features ``(N, 13)`` float32, ``is_self`` 0, cached until the
+        next step and read-only (an observation marks its own vehicle in a copy).
 
         Built as one flat list of Python numbers, converted to float32 in one call (a flat list
         converts about twice as fast as nested rows): for the paper's 4 vehicles about a third
@@ -41,30 +41,28 @@ class Features:
                     self.conflict.tolist(), self.node.tolist()):
                 values += (st, bat, status_code(rel, pk), ox, oy, z, vx, vy,
                            -rel if pk != NO_OPERATION else 0.0, d, c, nd, 0.0)
-            self._evtol_cache = np.array(values, dtype=np.float32).reshape(self.n, len(EVTOL_FEATURES))
+            cache = np.array(values, dtype=np.float32).reshape(self.n, len(EVTOL_FEATURES))
+            cache.setflags(write=False)
+            self._evtol_cache = cache
         return self._evtol_cache
 
-    def port_nodes(self) -> np.ndarray:
-        """Vertiport graph node features ``(P, 4)``: available, type, x_m, y_m (a new array;
-        built once a step)."""
+    def port_features(self) -> np.ndarray:
+        """The vertiport graph's node features ``(P, 4)`` float32: available, type, x_m, y_m;
+        built once a step, read-only."""
         if self._port_cache is None:
             f = self._port_static.copy()
             f[:, 0] = self.node_occupant == -1
+            f.setflags(write=False)
             self._port_cache = f
-        return self._port_cache.copy()
-
-    def evtol_nodes(self, observer: int) -> np.ndarray:
-        """eVTOL graph node features ``(N, 13)`` as seen by vehicle ``observer``."""
-        f = self._evtol_base().copy()
-        f[observer, _IS_SELF] = 1.0
-        return f
-
-    def self_features(self, v: int) -> np.ndarray:
-        return self._evtol_base()[v, : len(SELF_FEATURES)].copy()
+        return self._port_cache
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        """Global, noise-free graph for a centralised critic."""
-        base = self._evtol_base()
+        """The global, noise-free graph a centralised critic reads: ``port_nodes (P, 5)`` (the
+        vertiport graph and each node's occupant), ``evtol_nodes (N, 17)`` (the eVTOL graph at
+        the true positions, ``is_self`` marking the acting vehicle, with vertical speed,
+        destination and avoidance layer) and ``clock (3,)`` (minute, acting vehicle, steps
+        left); new arrays."""
+        base = self.evtol_features()
         evtol = np.empty((self.n, len(EVTOL_FEATURES) + len(STATE_EXTRA_FEATURES)), dtype=np.float32)
         evtol[:, : len(EVTOL_FEATURES)] = base
         evtol[:, 3:5] = self.pos[:, :2]
@@ -75,7 +73,7 @@ class Features:
         evtol[:, k + 1:k + 3] = self.layout.destination_xy_m[self.dest]
         evtol[:, k + 3] = self.avoid_layer
         ports = np.empty((self.layout.n_nodes, len(STATE_PORT_FEATURES)), dtype=np.float32)
-        ports[:, :4] = self.port_nodes()
+        ports[:, :4] = self.port_features()
         ports[:, 4] = self.node_occupant
         clock = np.array([self.minute, self.acting,
                           self.cfg.schedule.episode_steps - self.step_count], dtype=np.float32)
