@@ -17,7 +17,7 @@ from torch_geometric.nn import GCNConv, global_mean_pool
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # so `agents` imports
 
-from agents.controllers.base import run_aec_episode  # noqa: E402
+from agents.controllers.episode import run_aec_episode  # noqa: E402
 from marl_vertiport import vertiport_v0  # noqa: E402
 from marl_vertiport.graph import to_graph_batch  # noqa: E402
 from marl_vertiport.sim.schema import (  # noqa: E402

@@ -4,9 +4,8 @@ ordering random < FCFS < heuristic on fixed seeds."""
 import numpy as np
 import pytest
 
-from agents.controllers.base import (
-    AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation, run_aec_episode, run_gym_episode,
-)
+from agents.controllers.base import AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation
+from agents.controllers.episode import run_aec_episode, run_gym_episode
 from agents.controllers.fcfs import FCFSController
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.registry import AgentSpecError, make_controller
@@ -255,7 +254,7 @@ def test_the_controller_example_of_docs_controllers_md_plays_a_legal_day():
     import re as _re
     from pathlib import Path as _Path
 
-    from agents.controllers.base import run_aec_episode
+    from agents.controllers.episode import run_aec_episode
     from marl_vertiport import vertiport_v0
 
     text = (_Path(__file__).resolve().parents[1] / "docs" / "controllers.md").read_text()
@@ -273,7 +272,7 @@ def test_pyg_example_acts_legally_on_two_vertiports_through_to_graph_batch():
     of weights on the paper's vertiport and on mid (2 hours of each)."""
     import torch
 
-    from agents.controllers.base import run_aec_episode
+    from agents.controllers.episode import run_aec_episode
     from examples.pyg_policy import PygController, PygPolicy
     from marl_vertiport import vertiport_v0
     from marl_vertiport.graph import to_graph_batch

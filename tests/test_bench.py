@@ -142,7 +142,7 @@ def test_replaying_a_controllers_recorded_actions_reproduces_its_days():
     """The traffic the benchmark replays is the controller's: replayed through the env, the
     recorded actions give the same day, metric for metric."""
     from agents.bench.workloads import record_traffic
-    from agents.controllers.base import run_aec_episode
+    from agents.controllers.episode import run_aec_episode
     from agents.controllers.registry import make_controller
     from marl_vertiport import vertiport_v0
 

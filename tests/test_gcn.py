@@ -242,7 +242,7 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     assert (tmp_path / "curves.csv").exists() and (tmp_path / "learning_curves.png").exists()
     assert not list(tmp_path.glob("*.tmp"))
     ctl = GCNController(final)
-    from agents.controllers.base import run_aec_episode
+    from agents.controllers.episode import run_aec_episode
     from marl_vertiport import vertiport_v0
 
     metrics = run_aec_episode(vertiport_v0.env(**{"schedule.episode_steps": 20}), ctl, 1)
@@ -293,7 +293,7 @@ def test_checkpoint_of_one_layout_acts_legally_a_full_day_on_others(tmp_path):
     """Trained on the paper's ports with 3 eVTOLs, it flies a whole day on a 5-eVTOL layout
     with two chargers and on a 6-eVTOL layout with 14 nodes; every action it takes is legal
     (the env raises on an illegal one)."""
-    from agents.controllers.base import run_aec_episode
+    from agents.controllers.episode import run_aec_episode
     from marl_vertiport import vertiport_v0
 
     small = tmp_path / "small.yaml"

@@ -5,7 +5,7 @@ import pytest
 
 from conftest import busy_action
 from marl_vertiport import IllegalActionError, vertiport_v0
-from marl_vertiport.sim.schema import AWAY, OUT_OF_SERVICE
+from marl_vertiport.sim.invariants import violations
 
 
 def run_day(config: str, seed: int, policy: str, check=None, **overrides) -> list:
@@ -31,25 +31,10 @@ def run_day(config: str, seed: int, policy: str, check=None, **overrides) -> lis
 
 
 def check_invariants(sim, obs) -> None:
-    assert ((sim.battery >= 0.0) & (sim.battery <= 100.0)).all()
-    # No two vehicles own (occupy or are headed for) one port or hover spot ...
-    owned = sim.node[sim.node >= 0]
-    assert len(owned) == len(set(owned.tolist()))
-    # ... and the occupancy table agrees with the vehicles.
-    for node, v in enumerate(sim.node_occupant.tolist()):
-        assert v == -1 or sim.node[v] == node
-    # Vehicles sitting still on a node are exactly there.
-    for v in range(sim.n):
-        if not sim.has_target[v] and sim.node[v] >= 0 and sim.status[v] != OUT_OF_SERVICE:
-            np.testing.assert_allclose(sim.pos[v], sim._node_pos[sim.node[v]], atol=1e-6)
-    for v in range(sim.n):
-        assert sim.action_mask(v).sum() >= 1
+    """The simulator's one invariant checker (marl_vertiport/sim/invariants.py), after a step."""
+    found = violations(sim)
+    assert not found, found
     assert obs["action_mask"].sum() >= 1
-    # Vehicles outside the airspace are outside it (beyond the boundary, minus rounding).
-    away = sim.status == AWAY
-    assert (np.hypot(*sim.pos[away, :2].T) >= sim.layout.airspace_radius_m * (1 - 2e-3)).all()
-    # Hover spots are only held by airborne vehicles at hover altitude or on their way.
-    assert sim.minute == sim.step_count
 
 
 @pytest.mark.slow

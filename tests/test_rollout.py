@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from agents.controllers.base import run_gym_episode
+from agents.controllers.episode import run_gym_episode
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.registry import make_controller
 from agents.controllers.planner import RolloutPlanner

@@ -56,7 +56,7 @@ class _EngineCallRecorder:
 def record_traffic(agent: str, config: Any, days: int, seed: int) -> list[list[int]]:
     """A controller's actions, day by day (day ``d`` on seed ``seed + d``), through the AEC
     env: the traffic that :func:`_env_loop` replays so that only the env is timed."""
-    from agents.controllers.base import run_aec_episode
+    from agents.controllers.episode import run_aec_episode
     from agents.controllers.registry import make_controller
     from marl_vertiport import vertiport_v0
 
@@ -288,46 +288,51 @@ def bench_traffic(configs: list[str], agents: list[str], days: int, repeats: int
     return rows
 
 
+class _TimedPlanner:
+    """The look-ahead planner as a controller of the episode loop, its own calls timed, with
+    the engine's share of them (in the env's and its scratch simulator's pybullet clients)."""
+
+    def __init__(self, planner: Any, recorder: _EngineCallRecorder | None) -> None:
+        self.planner, self.recorder = planner, recorder
+        self.engines: list[Any] = []
+        self.spent = self.engine = 0.0
+        self.planned = 0
+        self.spans: list[tuple[int, int]] = []
+
+    def bind(self, sim: Any) -> None:
+        self.planner.bind(sim)
+        self.engines = [sim.physics, self.planner._scratch.physics]
+
+    def act(self, obs: dict) -> int:
+        recorder, engines = self.recorder, self.engines
+        first = len(recorder.calls) if recorder else 0
+        before = sum(e.engine_seconds for e in engines)
+        start = time.perf_counter()
+        action = int(self.planner.act(obs))
+        self.spent += time.perf_counter() - start
+        self.engine += sum(e.engine_seconds for e in engines) - before
+        if recorder:
+            self.spans.append((first, len(recorder.calls)))
+        self.planned += int(self.planner.last_q != {})
+        return action
+
+
 def _planner_loop(config: str, decisions: int, seed: int,
                   recorder: _EngineCallRecorder | None = None) -> dict[str, Any]:
-    """The look-ahead planner drives the AEC env through ``decisions`` turns; only its own calls
-    are timed, with the engine's share of them (its snapshots, rollouts and restores, in the
-    env's and its scratch simulator's pybullet clients). With ``recorder`` the engine calls are
-    recorded and ``spans`` lists the index range of each timed call."""
-    from agents.controllers.base import _prepare
+    """The look-ahead planner drives the AEC env through ``decisions`` turns (the episode
+    loop); only its own calls are timed, with the engine's share of them. With ``recorder``
+    the engine calls are recorded and ``spans`` lists the index range of each timed call."""
+    from agents.controllers.episode import run_episode
     from agents.controllers.registry import make_controller
     from marl_vertiport import vertiport_v0
 
     env = vertiport_v0.env(config=config)
-    planner = make_controller("rollout")
-    env.reset(seed=seed)
-    _prepare(planner, env, seed)
-    engines = [env.unwrapped.sim.physics, planner._scratch.physics]
-    spent = engine = 0.0
-    n = planned = 0
-    spans: list[tuple[int, int]] = []
-    for _ in env.agent_iter():
-        obs, _, term, trunc, _ = env.last()
-        if term or trunc:
-            env.step(None)
-            continue
-        first = len(recorder.calls) if recorder else 0
-        before = sum(e.engine_seconds for e in engines)
-        start = time.perf_counter()
-        action = int(planner.act(obs))
-        spent += time.perf_counter() - start
-        engine += sum(e.engine_seconds for e in engines) - before
-        if recorder:
-            spans.append((first, len(recorder.calls)))
-        planned += int(planner.last_q != {})
-        env.step(action)
-        n += 1
-        if n >= decisions:
-            break
+    timed = _TimedPlanner(make_controller("rollout"), recorder)
+    metrics = run_episode(env, timed, seed, max_steps=decisions)
     env.close()
-    planner.close()
-    return {"decisions": n, "simulated": planned, "seconds": spent, "engine_s": engine,
-            "spans": spans}
+    timed.planner.close()
+    return {"decisions": int(metrics["steps"]), "simulated": timed.planned, "seconds": timed.spent,
+            "engine_s": timed.engine, "spans": timed.spans}
 
 
 def bench_planner(config: str, decisions: int, seed: int = 2100) -> dict[str, Any]:

@@ -1,4 +1,5 @@
-"""The controller interface, a named view of observations, and episode runners.
+"""The controller interface and a named view of observations (the episode loop that drives a
+controller is :mod:`agents.controllers.episode`).
 
 A controller (policy) is any object with ``act(observation) -> int`` that returns a legal action
 for the eVTOL whose observation it gets (the observation of the AEC env, which is also the
@@ -8,20 +9,20 @@ episode. One object acts for every eVTOL in turn, as the centralised ATC does.
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, EVTOL_FEATURES, HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE,
-    PORT_FEATURES, TAXIING, ActionLayout, format_actions,
+    PORT_FEATURES, TAXIING, ActionLayout,
 )
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, NORMAL_PORT
 
 __all__ = [
     "ARRIVING", "AWAY", "DEPARTING", "HOVERING", "ON_CHARGER", "ON_PORT", "OUT_OF_SERVICE",
     "TAXIING", "CHARGING_PORT", "HOVER_SPOT", "NORMAL_PORT", "Controller", "Observation",
-    "Policy", "run_aec_episode", "run_gym_episode",
+    "Policy",
 ]
 
 _COL = {name: i for i, name in enumerate(EVTOL_FEATURES)}
@@ -187,71 +188,3 @@ class Observation:
     def legal(self) -> np.ndarray:
         """Indices of the legal actions."""
         return np.flatnonzero(self.mask)
-
-
-def action_names(env: Any) -> list[str]:
-    """The names of ``env``'s actions (either API), for error messages."""
-    sim = env.unwrapped.sim
-    return sim.actions.names(sim.layout)
-
-
-def _check_legal(policy: Any, agent: str, action: Any, mask: np.ndarray,
-                 names: list[str]) -> int:
-    """``action`` as an int if ``mask`` allows it, else ``ValueError`` naming the controller,
-    the agent and the legal actions (in the env's own format, :func:`format_actions`)."""
-    name = getattr(policy, "name", type(policy).__name__)
-    legal = format_actions(np.flatnonzero(mask), names)
-    try:
-        a = int(action)
-    except (TypeError, ValueError):
-        raise ValueError(f"controller {name!r} returned {action!r} for {agent}, not an integer "
-                         f"action; legal actions were {legal}") from None
-    if a != action or a < 0 or a >= len(mask) or not mask[a]:
-        raise ValueError(f"controller {name!r} returned the illegal action {action!r} for "
-                         f"{agent}; legal actions were {legal}")
-    return a
-
-
-def _prepare(policy: Any, env: Any, seed: int) -> None:
-    """Start ``policy``'s episode: ``reset(seed)``, and ``bind(sim)`` for a model-based
-    controller that plans with the simulator (such as :class:`agents.controllers.planner.RolloutPlanner`)."""
-    if hasattr(policy, "reset"):
-        policy.reset(seed=seed)
-    if hasattr(policy, "bind"):
-        policy.bind(env.unwrapped.sim)
-
-
-def run_aec_episode(env: Any, policy: Any, seed: int, on_step=None) -> dict[str, Any]:
-    """One episode of the AEC env driven by ``policy``; returns the episode metrics.
-
-    ``on_step(agent, action, env)`` is called after every live step (for recording frames or
-    actions). A policy returning an illegal action raises ``ValueError`` naming it.
-    """
-    env.reset(seed=seed)
-    _prepare(policy, env, seed)
-    names = action_names(env)
-    info: dict[str, Any] = {}
-    for agent in env.agent_iter():
-        obs, _, termination, truncation, info = env.last()
-        if termination or truncation:
-            env.step(None)
-            continue
-        action = _check_legal(policy, agent, policy.act(obs), obs["action_mask"], names)
-        env.step(action)
-        if on_step is not None:
-            on_step(agent, action, env)
-    return info["episode"]
-
-
-def run_gym_episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
-    """One episode of the single-agent env driven by the same kind of ``policy``."""
-    obs, _ = env.reset(seed=seed)
-    _prepare(policy, env, seed)
-    names = action_names(env)
-    truncated = terminated = False
-    info: dict[str, Any] = {}
-    while not (truncated or terminated):
-        action = _check_legal(policy, info.get("agent", "the acting eVTOL"), policy.act(obs),
-                              obs["action_mask"], names)
-        obs, _, terminated, truncated, info = env.step(action)
-    return info["episode"]

@@ -12,7 +12,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from agents.controllers.base import run_aec_episode
+from agents.controllers.episode import run_aec_episode
 from agents.controllers.registry import make_controller
 from agents.evaluate.settings import EpisodeRecord, EpisodeTask, EvalSettings, Overrides
 from agents.execution import Backend, LocalBackend

@@ -11,7 +11,7 @@ from typing import Any, Callable
 import numpy as np
 from PIL import Image
 
-from agents.controllers.base import run_aec_episode
+from agents.controllers.episode import run_aec_episode
 from marl_vertiport.sim.core import VertiportSim
 from agents.render.frames import (
     FrameComposer, _ACT_BG, _AMBER, _BG, _BLUE, _DIM, _GREEN, _RED, _ROW_BG, _SKY, _TEXT,

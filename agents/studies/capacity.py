@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.controllers.base import _check_legal, _prepare, action_names
+from agents.controllers.episode import run_episode
 from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from agents.common.seeds import VALIDATION_SEED_BASE, parse_seed_range
 from marl_vertiport import ConfigError, vertiport_v0
@@ -46,43 +46,40 @@ class ChargerDay:
 
 def charger_day(agent: str, config: str, fleet_size: int, seed: int,
                 overrides: dict | None = None) -> ChargerDay:
-    """Run one day of ``agent`` and account for the charging ports' minutes and energy."""
+    """Run one day of ``agent`` and account for the charging ports' minutes and energy: before
+    each step, who is on each charger and in what state; after it, the battery they gained."""
     env = vertiport_v0.env(config=config, fleet_size=fleet_size, **(overrides or {}))
-    policy = make_controller(agent)
-    env.reset(seed=seed)
-    _prepare(policy, env, seed)
     sim = env.unwrapped.sim
-    names = action_names(env)
     chargers = sim._charging_nodes.tolist()
     day = ChargerDay(seed=seed, fleet_size=fleet_size)
     minutes = sim.minutes_per_step
     last_occupant = {c: -1 for c in chargers}
-    info: dict = {}
-    for agent_name in env.agent_iter():
-        obs, _, termination, truncation, info = env.last()
-        if termination or truncation:
-            env.step(None)
-            continue
-        before = sim.battery.copy()
-        on_it = []
+    step: dict = {}
+
+    def before_step(_agent: str, _obs: dict, _env) -> None:
+        step["battery"], step["on_it"] = sim.battery.copy(), []
         for c in chargers:
             v = int(sim.node_occupant[c])
             if v < 0:
                 day.free_min += minutes
             elif sim.status[v] != ON_CHARGER:
                 day.approach_min += minutes
-            elif before[v] >= 100.0:
+            elif step["battery"][v] >= 100.0:
                 day.parked_full_min += minutes
             else:
                 day.charging_min += minutes
-                on_it.append(v)
+                step["on_it"].append(v)
             if v >= 0 and v != last_occupant[c]:
                 day.sessions += 1
             last_occupant[c] = v
-        env.step(_check_legal(policy, agent_name, policy.act(obs), obs["action_mask"], names))
-        day.delivered_pct += float(sum(max(sim.battery[v] - before[v], 0.0) for v in on_it))
+
+    def after_step(_agent: str, _action: int, _env) -> None:
+        before = step["battery"]
+        day.delivered_pct += float(sum(max(sim.battery[v] - before[v], 0.0) for v in step["on_it"]))
+
+    episode = run_episode(env, make_controller(agent), seed, before_step=before_step,
+                          after_step=after_step)
     env.close()
-    episode = info["episode"]
     day.vehicles_lost = int(episode["stranded_air"] + episode["stranded_ground"])
     return day
 

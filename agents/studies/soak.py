@@ -20,7 +20,7 @@ from collections import Counter
 from pathlib import Path
 
 from agents.common.seeds import VALIDATION_SEED_BASE
-from agents.controllers.base import run_aec_episode
+from agents.controllers.episode import run_aec_episode
 from agents.controllers.registry import make_controller
 from marl_vertiport import ConfigError, vertiport_v0
 from marl_vertiport.sim.invariants import violations

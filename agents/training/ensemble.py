@@ -32,7 +32,7 @@ import torch
 
 from agents.common.seeds import ENSEMBLE_SEED_BASE, training_seed
 from agents.execution import Backend, LocalBackend
-from agents.training.imitation import ACTOR_GROUPS, _learner, collect, fit_actor, to_tensordict
+from agents.training.imitation import DecisionLog, _learner, collect, fit_actor, to_tensordict
 
 #: Offset of the refits' seeds: refit ``k`` draws its weights and batches with ``REFIT_SEED_BASE + k``.
 REFIT_SEED_BASE = 1000
@@ -62,38 +62,40 @@ class EnsembleDay:
     members: tuple[dict[str, Any], ...]
 
 
+class EnsembleDriver:
+    """The ensemble as a controller of the episode loop: at a step with a choice it acts and
+    the state is logged with its action as the label; a step without one takes its one legal
+    action."""
+
+    def __init__(self, ensemble: Any, log: DecisionLog) -> None:
+        self.ensemble, self.log = ensemble, log
+
+    def act(self, obs: dict) -> int:
+        self.log.see(obs)
+        mask = obs["action_mask"]
+        if int(mask.sum()) > 1:
+            action = self.ensemble.act(obs)
+            self.log.add(obs, action, 0.0)
+            return action
+        return int(np.argmax(mask))
+
+
 def drive_day(task: EnsembleDay) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Run one day with the ensemble; return the observations of the steps with a choice (the
-    ensemble's action as ``label``, shape ``(T,)``) and the day's metrics."""
+    """Run one day with the ensemble (through the episode loop, the single-agent env); return
+    the observations of the steps with a choice (the ensemble's action as ``label``, shape
+    ``(T,)``) and the day's metrics."""
+    from agents.controllers.episode import run_episode
     from agents.controllers.gcn import GCNEnsemble
     from marl_vertiport.config import from_dict
     from marl_vertiport.gym_env import VertiportEnv
 
     torch.set_num_threads(1)
     env = VertiportEnv(config=from_dict(task.env_config))
-    ensemble = GCNEnsemble(list(task.members))
-    obs, _ = env.reset(seed=task.seed)
-    rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
-    labels: list[int] = []
-    for _ in range(task.steps):
-        mask = obs["action_mask"]
-        if int(mask.sum()) > 1:
-            action = ensemble.act(obs)
-            for key in ACTOR_GROUPS[:3]:
-                rows[key].append(obs["observation"][key])
-            rows["action_mask"].append(mask)
-            labels.append(action)
-        else:
-            action = int(np.argmax(mask))
-        obs, _, _, truncated, _ = env.step(action)
-        if truncated:
-            break
-    metrics = env.sim.episode_metrics()
+    log = DecisionLog()
+    metrics = run_episode(env, EnsembleDriver(GCNEnsemble(list(task.members)), log), task.seed,
+                          max_steps=task.steps)
     env.close()
-    data = {k: np.stack(v) for k, v in rows.items()}
-    data["label"] = np.asarray(labels, dtype=np.int64)
-    data["regret"] = np.zeros(len(labels), dtype=np.float32)
-    return data, metrics
+    return log.arrays(), metrics
 
 
 def ensemble_targets(members: list, obs) -> torch.Tensor:

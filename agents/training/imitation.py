@@ -78,9 +78,85 @@ def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: i
     raise ValueError(f"teacher {name!r}: use one of {TEACHERS}")
 
 
+class DecisionLog:
+    """The decisions of a day with a choice (two or more legal actions): each observation's
+    groups, its label and its weight; as arrays by :meth:`arrays`."""
+
+    def __init__(self) -> None:
+        self.rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
+        self.labels: list[int] = []
+        self.weights: list[float] = []
+        self.first: dict[str, np.ndarray] | None = None
+
+    def see(self, obs: dict) -> None:
+        """Note the shapes of a day's observations (so an empty log still has them)."""
+        if self.first is None:
+            self.first = {**obs["observation"], "action_mask": obs["action_mask"]}
+
+    def add(self, obs: dict, label: int, weight: float) -> None:
+        for key in ACTOR_GROUPS[:3]:
+            self.rows[key].append(obs["observation"][key])
+        self.rows["action_mask"].append(obs["action_mask"])
+        self.labels.append(label)
+        self.weights.append(weight)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """``port_nodes (T, P, 4)``, ``evtol_nodes (T, N, 13)``, ``self (T, 11)``,
+        ``action_mask (T, A)``, ``label (T,)`` and ``regret (T,)`` of the ``T`` decisions."""
+        first = self.first or {}
+        data = {k: np.stack(v) if v else np.empty((0, *np.shape(first[k])), np.asarray(first[k]).dtype)
+                for k, v in self.rows.items()}
+        data["label"] = np.asarray(self.labels, dtype=np.int64)
+        data["regret"] = np.asarray(self.weights, dtype=np.float32)
+        return data
+
+
+class Demonstrator:
+    """The driver of a demonstration day, as a controller of the episode loop: at a step with a
+    choice the teacher labels the state (and the decision is logged with what a wrong choice
+    costs, see :func:`label_weights`), then the learner acts if there is one, else the teacher's
+    label is taken; in the day starts a share ``noise`` of the actions is replaced by a random
+    legal one. A step without a choice takes its one legal action. The teacher is bound to the
+    simulator at the start of the day; it keeps the seed it was made with."""
+
+    def __init__(self, teacher: Any, learner: Any, noise: float, noise_rng: np.random.Generator,
+                 log: DecisionLog) -> None:
+        self.teacher, self.learner, self.noise, self.noise_rng = teacher, learner, noise, noise_rng
+        self.log = log
+        self.label = 0
+
+    def bind(self, sim: Any) -> None:
+        if hasattr(self.teacher, "bind"):
+            self.teacher.bind(sim)
+
+    def act(self, obs: dict) -> int:
+        teacher, log = self.teacher, self.log
+        log.see(obs)
+        mask = obs["action_mask"]
+        choice = int(mask.sum()) > 1
+        if not choice:
+            self.label = int(np.argmax(mask))
+        elif teacher is not None:
+            self.label = int(teacher.act(obs))
+            q = getattr(teacher, "last_q", None)
+            # What a wrong choice here can cost: the spread of the simulated candidates' values,
+            # or without bound where the teacher ruled an action out as unsafe.
+            if getattr(teacher, "last_forced", False):
+                weight = float("inf")
+            else:
+                weight = max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0
+            log.add(obs, self.label, weight)
+        action = self.learner.act(obs) if self.learner is not None and choice else self.label
+        if choice and self.noise > 0.0 and self.noise_rng.random() < self.noise:
+            action = int(self.noise_rng.choice(np.flatnonzero(mask)))
+        return action
+
+
 def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Run one day; return the observations of the steps with a choice, the teacher's label of
-    each (``label``, shape ``(T,)``), and the metrics of the day (so far, for a partial day)."""
+    """Run one day (:class:`Demonstrator` through the episode loop, the single-agent env);
+    return the observations of the steps with a choice, the teacher's label of each (``label``,
+    shape ``(T,)``), and the metrics of the day (so far, for a partial day)."""
+    from agents.controllers.episode import run_episode
     from agents.controllers.gcn import GCNController
     from marl_vertiport.config import from_dict
     from marl_vertiport.gym_env import VertiportEnv
@@ -92,47 +168,13 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     teacher = (make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed)
                if task.labelled else None)
     learner = GCNController(task.learner) if task.learner is not None else None
-    noise_rng = np.random.default_rng([task.seed, 1])
-    obs, _ = env.reset(seed=task.seed)
-    first = {**obs["observation"], "action_mask": obs["action_mask"]}  # the rows' shapes
-    if hasattr(teacher, "bind"):
-        teacher.bind(env.sim)
-    rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
-    labels: list[int] = []
-    weights: list[float] = []
-    for _ in range(task.steps):
-        mask = obs["action_mask"]
-        choice = int(mask.sum()) > 1
-        if not choice:
-            label = int(np.argmax(mask))
-        elif teacher is not None:
-            label = int(teacher.act(obs))
-            for key in ACTOR_GROUPS[:3]:
-                rows[key].append(obs["observation"][key])
-            rows["action_mask"].append(mask)
-            labels.append(label)
-            q = getattr(teacher, "last_q", None)
-            # What a wrong choice here can cost: the spread of the simulated candidates' values,
-            # or without bound where the teacher ruled an action out as unsafe.
-            if getattr(teacher, "last_forced", False):
-                weights.append(float("inf"))
-            else:
-                weights.append(max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0)
-        action = learner.act(obs) if learner is not None and choice else label
-        if choice and task.noise > 0.0 and noise_rng.random() < task.noise:
-            action = int(noise_rng.choice(np.flatnonzero(mask)))
-        obs, _, _, truncated, _ = env.step(action)
-        if truncated:
-            break
-    metrics = env.sim.episode_metrics()
+    log = DecisionLog()
+    driver = Demonstrator(teacher, learner, task.noise, np.random.default_rng([task.seed, 1]), log)
+    metrics = run_episode(env, driver, task.seed, max_steps=task.steps)
     env.close()
     if hasattr(teacher, "close"):
         teacher.close()
-    data = {k: np.stack(v) if v else np.empty((0, *np.shape(first[k])), np.asarray(first[k]).dtype)
-            for k, v in rows.items()}
-    data["label"] = np.asarray(labels, dtype=np.int64)
-    data["regret"] = np.asarray(weights, dtype=np.float32)
-    return data, metrics
+    return log.arrays(), metrics
 
 
 def pad_day(data: dict[str, np.ndarray], max_nodes: int, max_evtols: int) -> dict[str, np.ndarray]:

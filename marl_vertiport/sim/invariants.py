@@ -1,5 +1,6 @@
-"""What must hold after every step of any day, whatever the actions and the uncertainties:
-the checks of the property-based tests and of the soak (``python -m agents.studies.soak``)."""
+"""What must hold after every step of any day, whatever the actions and the uncertainties: the
+one checker of the tests (``tests/test_invariants.py``), the property-based tests and the fuzz
+target (``make fuzz``) and the soak (``make soak``)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import math
 import numpy as np
 
 from marl_vertiport.sim.core import VertiportSim
-from marl_vertiport.sim.schema import AWAY
+from marl_vertiport.sim.schema import AWAY, OUT_OF_SERVICE
 
 
 def reward_bound(sim: VertiportSim) -> float:
@@ -20,10 +21,14 @@ def reward_bound(sim: VertiportSim) -> float:
 
 def violations(sim: VertiportSim, reward: float | None = None) -> list[str]:
     """The invariants that fail now (empty when all hold): the step's reward finite and within
-    :func:`reward_bound`; batteries in [0, 100]; no vehicle inside the airspace below the
-    ground; no two vehicles on the ground inside one another; each port or hover spot held by
-    at most one vehicle, consistently both ways; every vehicle's mask int8 and non-empty."""
+    :func:`reward_bound`; batteries in [0, 100]; the clock at ``steps x minutes_per_step``; no
+    vehicle inside the airspace below the ground; no two vehicles on the ground inside one
+    another; each port or hover spot held by at most one vehicle, consistently both ways; a
+    vehicle at rest on its node exactly there; a vehicle away outside the airspace (its
+    boundary, less a rounding of 0.2 %); every vehicle's mask int8 and non-empty."""
     out = []
+    if not math.isclose(sim.minute, sim.step_count * sim.minutes_per_step, rel_tol=1e-12, abs_tol=1e-9):
+        out.append(f"clock at minute {sim.minute} after {sim.step_count} steps")
     if reward is not None and not (math.isfinite(reward) and abs(reward) <= reward_bound(sim) + 1e-9):
         out.append(f"reward {reward} outside [-{reward_bound(sim)}, {reward_bound(sim)}]")
     bad = np.flatnonzero((sim.battery < 0.0) | (sim.battery > 100.0) | ~np.isfinite(sim.battery))
@@ -43,6 +48,16 @@ def violations(sim: VertiportSim, reward: float | None = None) -> list[str]:
     for node, occupant in enumerate(sim.node_occupant.tolist()):
         if occupant != -1 and sim.node[occupant] != node:
             out.append(f"node {node}: occupant evtol_{occupant} holds node {sim.node[occupant]}")
+    at_rest = np.flatnonzero(~sim.has_target & (sim.node >= 0) & (sim.status != OUT_OF_SERVICE))
+    for v in at_rest:
+        node = sim.node[v]
+        if np.abs(sim.pos[v] - sim._node_pos[node]).max() > 1e-6:
+            out.append(f"evtol_{v}: at rest {sim.pos[v].round(4).tolist()} off its node {node} "
+                       f"{sim._node_pos[node].round(4).tolist()}")
+    away = np.flatnonzero(~inside)
+    radius = sim.layout.airspace_radius_m * (1 - 2e-3)
+    out += [f"evtol_{v}: away {float(np.hypot(*sim.pos[v, :2])):.3f} m from the centre, inside "
+            f"the airspace" for v in away if np.hypot(*sim.pos[v, :2]) < radius]
     for v in range(sim.n):
         mask = sim.action_mask(v)
         if mask.dtype != np.int8 or not mask.any():
