@@ -5,6 +5,9 @@ observations is a reshape: node features ``(B, P, F)`` become ``(B*P, F)``, and 
 sample ``b`` are shifted by ``b*P``. The result equals ``Batch.from_data_list`` of the
 per-sample graphs (a test checks this), at a fraction of the cost.
 
+torch and torch-geometric are imported when a batch is first made: importing this module, or
+the env, loads neither.
+
 Accepted inputs: one AEC/Gymnasium observation (arrays without a batch dimension), a list of
 them, or a batched observation (leading dimension ``B``, e.g. from a vector env), with numpy
 arrays or torch tensors. Both ``{"observation": {...}, "action_mask": ...}`` and the inner
@@ -17,9 +20,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import torch
-from torch_geometric.data import Batch
+
+if TYPE_CHECKING:  # torch and torch-geometric load when a batch is made, not on import
+    import torch
+    from torch_geometric.data import Batch
 
 _GRAPH_KEYS = ("port_nodes", "evtol_nodes", "self")
 _UNBATCHED_NDIM = {"port_nodes": 2, "evtol_nodes": 2, "self": 1, "action_mask": 1}
@@ -56,6 +63,8 @@ class GraphObservation:
 
 
 def _as_tensor(value: Any, device: torch.device | str | None) -> torch.Tensor:
+    import torch
+
     if isinstance(value, torch.Tensor):
         return value.to(device) if device is not None else value
     return torch.as_tensor(np.asarray(value), device=device)
@@ -74,7 +83,9 @@ def _collate(obs: Any) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for key in items[0]:
             values = [item[key] for item in items]
-            if isinstance(values[0], torch.Tensor):
+            if type(values[0]).__module__.startswith("torch"):
+                import torch
+
                 out[key] = torch.stack(values)
             else:
                 out[key] = np.stack(values)
@@ -93,6 +104,9 @@ def _collate(obs: Any) -> dict[str, Any]:
 
 def _graph_batch(nodes: torch.Tensor) -> Batch:
     """``nodes (B, K, F)`` -> one PyG batch of ``B`` complete graphs of ``K`` nodes."""
+    import torch
+    from torch_geometric.data import Batch
+
     b, k, f = nodes.shape
     device = nodes.device
     edges = torch.as_tensor(complete_edge_index(k), device=device)  # (2, E)
