@@ -53,44 +53,46 @@ def test_bench_smoke(tmp_path):
 
 
 def test_api_floor_loop_steps_a_do_nothing_env_through_both_apis():
-    from agents.bench.workloads import _api_floor_loop
+    from agents.bench.overhead import api_floor_loop
 
     for api in ("aec", "single_agent"):
-        assert _api_floor_loop(api, 50) > 0  # runs; its value is only reported, never asserted
+        assert api_floor_loop(api, 50) > 0  # runs; its value is only reported, never asserted
 
 
 def test_engine_replay_repeats_the_recorded_run():
     """The engine-alone measurement replays the pybullet calls of a run of the same seed: the
     recorded run steps the engine exactly as often as a plain run does, and its timed calls
     hold one ``stepSimulation`` per step with motion."""
-    from agents.bench.workloads import _EngineCallRecorder, _env_loop, _replay_engine
+    from agents.bench.engine import EngineCallRecorder, replay_engine
+    from agents.bench.env import env_loop
     from marl_vertiport.sim import physics as physics_module
 
-    plain = _env_loop("single_agent", "paper", 300, seed=3)
+    plain = env_loop("single_agent", "paper", 300, seed=3)
     real = physics_module.p
-    recorder = _EngineCallRecorder(real)
+    recorder = EngineCallRecorder(real)
     physics_module.p = recorder
     try:
-        recorded = _env_loop("single_agent", "paper", 300, seed=3, recorder=recorder)
+        recorded = env_loop("single_agent", "paper", 300, seed=3, recorder=recorder)
     finally:
         physics_module.p = real
     assert recorded["moving_steps"] == plain["moving_steps"] > 0
     timed = recorder.calls[recorded["first_timed_call"]:recorded["last_timed_call"]]
     assert sum(fn is real.stepSimulation for fn, _, _ in timed) == plain["moving_steps"]
-    assert _replay_engine(recorder, recorded["first_timed_call"], recorded["last_timed_call"]) > 0
+    assert replay_engine(recorder, recorded["first_timed_call"], recorded["last_timed_call"]) > 0
 
 
 def test_planner_engine_replay_follows_both_clients_and_times_only_the_decisions():
     """The planner's engine-alone figure replays the calls on the env's client and on its
     scratch simulator's, each on a fresh client of its own, and times only the decisions'."""
-    from agents.bench.workloads import _EngineCallRecorder, _planner_loop, _replay_engine_spans
+    from agents.bench.engine import EngineCallRecorder, replay_engine_spans
+    from agents.bench.planner import planner_loop
     from marl_vertiport.sim import physics as physics_module
 
     real = physics_module.p
-    recorder = _EngineCallRecorder(real)
+    recorder = EngineCallRecorder(real)
     physics_module.p = recorder
     try:
-        recorded = _planner_loop("paper", 40, seed=5, recorder=recorder)
+        recorded = planner_loop("paper", 40, seed=5, recorder=recorder)
     finally:
         physics_module.p = real
     assert len(recorder.connected) == 2 and len(recorded["spans"]) == 40
@@ -98,7 +100,7 @@ def test_planner_engine_replay_follows_both_clients_and_times_only_the_decisions
     assert 0 < inside < len(recorder.calls)  # the env's own steps lie between the spans
     steps = [fn is real.stepSimulation for fn, _, _ in recorder.calls]
     assert 0 < sum(any(steps[a:b]) for a, b in recorded["spans"]) <= recorded["simulated"]
-    assert _replay_engine_spans(recorder, recorded["spans"]) > 0
+    assert replay_engine_spans(recorder, recorded["spans"]) > 0
 
 
 def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeypatch):
@@ -106,11 +108,11 @@ def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeyp
     disconnects its own client through the recorded module; the replay must not follow it."""
     import gc
 
-    import agents.bench.workloads as bench
+    import agents.bench.env as bench
     from marl_vertiport.gym_env import VertiportEnv
 
     others = [VertiportEnv("paper") for _ in range(2)]
-    plain_loop, runs = bench._env_loop, []
+    plain_loop, runs = bench.env_loop, []
 
     def loop(*args, **kwargs):
         runs.append(1)
@@ -119,8 +121,8 @@ def test_engine_replay_ignores_other_envs_collected_during_the_recording(monkeyp
             gc.collect()
         return plain_loop(*args, **kwargs)
 
-    monkeypatch.setattr(bench, "_env_loop", loop)
-    result = bench._env_run("aec", "paper", 100, seed=0)
+    monkeypatch.setattr(bench, "env_loop", loop)
+    result = bench.env_run("aec", "paper", 100, seed=0)
     assert len(runs) == 2 and result["engine_alone_s_per_step"] > 0
 
 
@@ -141,7 +143,7 @@ def test_floor_paragraph_names_the_binding_api_and_the_room_left():
 def test_replaying_a_controllers_recorded_actions_reproduces_its_days():
     """The traffic the benchmark replays is the controller's: replayed through the env, the
     recorded actions give the same day, metric for metric."""
-    from agents.bench.workloads import record_traffic
+    from agents.bench.env import record_traffic
     from agents.controllers.episode import run_aec_episode
     from agents.controllers.registry import make_controller
     from marl_vertiport import vertiport_v0

@@ -182,8 +182,10 @@ def test_mp4_when_a_writer_is_installed(tmp_path):
 
 
 def test_outcome_words():
-    assert render.FrameComposer._outcomes({"action": 1, "takeoff": True, "good_takeoff": True})[0][0].endswith("take-off ok")
-    words = [w for w, _ in render.FrameComposer._outcomes(
+    from agents.render.panel import StatusPanel
+
+    assert StatusPanel._outcomes({"action": 1, "takeoff": True, "good_takeoff": True})[0][0].endswith("take-off ok")
+    words = [w for w, _ in StatusPanel._outcomes(
         {"action": 13, "commanded_action": 12, "conflict": True, "reward_terms": {"safety": -5.0}})]
     assert words == ["\u2717 conflict", "misread"]
 

@@ -37,11 +37,10 @@ from typing import Any
 
 from agents.common.provenance import provenance
 from agents.common.files import write_atomic
-from agents.bench.workloads import (
-    bench_api_floor, bench_env, bench_env_memory, bench_inference, bench_profile,
-    bench_fleet_sizes, bench_planner, bench_training, bench_traffic, bench_vector,
-    fleet_size_figure,
-)
+from agents.bench.env import bench_env, bench_fleet_sizes, bench_traffic, fleet_size_figure
+from agents.bench.learning import bench_env_memory, bench_inference, bench_training, bench_vector
+from agents.bench.overhead import bench_api_floor, bench_profile
+from agents.bench.planner import bench_planner
 from agents.bench.report import report
 
 

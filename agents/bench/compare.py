@@ -41,7 +41,7 @@ def run_replay(root: Path, traffic_file: Path) -> dict:
 
 def compare(base: Path, agent: str, config: str, days: int, repeats: int, seed: int,
             log=print) -> dict:
-    from agents.bench.workloads import record_traffic
+    from agents.bench.env import record_traffic
 
     traffic = {"config": config, "seed": seed, "days": record_traffic(agent, config, days, seed)}
     with tempfile.TemporaryDirectory() as tmp:

@@ -9,7 +9,8 @@
 
 from agents.render.camera import Camera, fit_camera
 from agents.render.cli import main, parse_size
-from agents.render.frames import FrameComposer, hhmm
+from agents.render.frames import FrameComposer
+from agents.render.style import hhmm
 from agents.render.video import GifQuantiser, RenderError, record_episode, write_video
 
 __all__ = ["Camera", "FrameComposer", "GifQuantiser", "RenderError", "fit_camera", "hhmm", "main",

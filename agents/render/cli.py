@@ -30,7 +30,8 @@ from agents.controllers.registry import AgentSpecError, agent_help, make_control
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import VEHICLE_COLOURS
 from agents.render.camera import DEFAULT_PITCH_DEG, DEFAULT_YAW_DEG
-from agents.render.frames import FrameComposer, _rgb
+from agents.render.frames import FrameComposer
+from agents.render.style import rgb
 from agents.render.video import (
     GifQuantiser, RenderError, _mp4_backend, record_episode, write_video,
 )
@@ -188,7 +189,7 @@ def _run(args: argparse.Namespace) -> int:
         def factory(s: VertiportSim) -> FrameComposer:
             return FrameComposer(s, width, height, args.yaw, args.pitch)
 
-        colours = [_rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)]) for i in range(sim.n)]
+        colours = [rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)]) for i in range(sim.n)]
         convert = GifQuantiser(colours) if out.suffix.lower() == ".gif" else None
         t0 = time.perf_counter()
         frames = record_episode(env, policy, args.seed, factory, start_step, n_steps, args.every,

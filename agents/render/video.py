@@ -13,9 +13,8 @@ from PIL import Image
 
 from agents.controllers.episode import run_aec_episode
 from marl_vertiport.sim.core import VertiportSim
-from agents.render.frames import (
-    FrameComposer, _ACT_BG, _AMBER, _BG, _BLUE, _DIM, _GREEN, _RED, _ROW_BG, _SKY, _TEXT,
-)
+from agents.render.frames import FrameComposer
+from agents.render.style import ACT_BG, AMBER, BG, BLUE, DIM, GREEN, RED, ROW_BG, SKY, TEXT
 
 
 
@@ -103,8 +102,8 @@ class GifQuantiser:
 
     def _build(self, first: Image.Image) -> Image.Image:
         w, h = first.size
-        extra = self.colours + [_BG, _ROW_BG, _ACT_BG, _TEXT, _DIM, _RED, _AMBER, _GREEN, _BLUE,
-                                _SKY, (255, 255, 255), (0, 0, 0), (245, 245, 245)]
+        extra = self.colours + [BG, ROW_BG, ACT_BG, TEXT, DIM, RED, AMBER, GREEN, BLUE,
+                                SKY, (255, 255, 255), (0, 0, 0), (245, 245, 245)]
         shades = [tuple(int(v * f) for v in c) for c in extra for f in np.linspace(0.35, 1.0, 8)]
         strip = np.zeros((max(8, h // 4), w, 3), dtype=np.uint8)
         for k, c in enumerate(shades):
