@@ -53,13 +53,13 @@ test-fast: $(STAMP)  ## the test suite without the full-episode tests
 	$(PY) -m pytest -q -m "not slow and not replay"
 
 check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (under a minute)
-	$(PY) -m pytest -q -m replay tests/test_shipped_results.py
+	$(PY) -m pytest -q -m replay tests/tools/test_shipped_results.py
 
 soak: $(STAMP)  ## many days with every uncertainty high on six layouts: invariants after every step, memory (under a minute on an idle 2-core AMD EPYC)
 	$(CLI) soak --days 40
 
 fuzz: $(STAMP)  ## the property-based tests on many more examples (HYPOTHESIS_PROFILE=long, under a minute on an idle 2-core AMD EPYC)
-	HYPOTHESIS_PROFILE=long $(PY) -m pytest -q tests/test_properties.py
+	HYPOTHESIS_PROFILE=long $(PY) -m pytest -q tests/sim/test_properties.py
 
 # CONFIG names an env config elsewhere; for `train` it names a train config when given.
 TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)

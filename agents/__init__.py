@@ -11,4 +11,4 @@ only from the layers below it:
   :mod:`agents.interop`, :mod:`agents.render`, :mod:`agents.bench`, :mod:`agents.studies`,
   :mod:`agents.checks` and the ``marl-vertiport`` command (:mod:`agents.cli`).
 
-``docs/architecture.md`` draws the layers; ``tests/test_architecture.py`` enforces them."""
+``docs/architecture.md`` draws the layers; ``tests/tools/test_architecture.py`` enforces them."""

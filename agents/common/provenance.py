@@ -3,7 +3,7 @@ checkpoints that played, and the machine.
 
 Every result file the tools write (evaluation, suites, sweeps, learning curves, the benchmark)
 records :func:`provenance`, so a reader can tell whether a shipped result was made with the
-shipped checkpoint and the committed code (``tests/test_shipped_results.py`` checks it)::
+shipped checkpoint and the committed code (``tests/tools/test_shipped_results.py`` checks it)::
 
     {"code": {"commit": "3f2c...", "dirty": false},
      "checkpoints": {"gcn": {"path": "agents/checkpoints/gcn_default.pt", "sha256": "9a1e..."}},

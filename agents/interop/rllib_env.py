@@ -119,7 +119,7 @@ def ppo_config(env_config: dict | None = None, *, hidden: int = 64, seed: int = 
         PPOConfig()
         # RLlib's env check steps a random action of the action space, unmasked; the env
         # raises on an illegal one, so the check fails at random: PettingZoo's api_test
-        # (tests/test_api.py) checks the env instead.
+        # (tests/envs/test_api.py) checks the env instead.
         .environment(register(), env_config=dict(env_config or {}), disable_env_checking=True)
         .multi_agent(policies={MODULE_ID}, policy_mapping_fn=_one_module)
         .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs={MODULE_ID: module}))

@@ -1,5 +1,5 @@
 """What must hold after every step of any day, whatever the actions and the uncertainties: the
-one checker of the tests (``tests/test_invariants.py``), the property-based tests and the fuzz
+one checker of the tests (``tests/sim/test_invariants.py``), the property-based tests and the fuzz
 target (``make fuzz``) and the soak (``make soak``)."""
 
 from __future__ import annotations

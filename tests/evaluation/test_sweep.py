@@ -17,7 +17,7 @@ from agents.sweep import load_sweep, parse_sweep
 from agents.sweep.cli import main, validate
 from agents.sweep.spec import SWEEP_DIR
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # controllers given by import path, as in test_evaluate
     sys.path.insert(0, str(ROOT))
 
@@ -106,10 +106,10 @@ def test_sweep_cli_on_a_tiny_grid_writes_the_csv_and_the_figure(tmp_path, capsys
 
 
 def test_a_controller_failing_mid_sweep_keeps_the_completed_episodes(tmp_path, capsys):
-    from tests.test_evaluate import STEPS, IllegalAfterK
+    from tests.evaluation.test_evaluate import STEPS, IllegalAfterK
 
     IllegalAfterK.calls = 0
-    spec = _write(tmp_path, {**BASE, "agents": ["tests.test_evaluate:IllegalAfterK"],
+    spec = _write(tmp_path, {**BASE, "agents": ["tests.evaluation.test_evaluate:IllegalAfterK"],
                              "set": {"schedule.episode_steps": STEPS}})
     out = tmp_path / "out"
     assert main([str(spec), "--workers", "1", "--out", str(out), "--no-progress"]) == 1

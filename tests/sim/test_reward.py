@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import seed0_sim
+from helpers import seed0_sim
 
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import HOVERING, NO_OPERATION, ON_PORT, PENDING_LANDING, TAXIING

@@ -20,16 +20,17 @@ from agents import evaluate as ev
 from agents.controllers.base import Controller
 from agents.common.seeds import EVAL_SEEDS
 
-ROOT = Path(__file__).resolve().parents[1]
-# The controllers below are loaded by import path (``tests.test_evaluate:...``), also in spawned
-# workers, which inherit this process's sys.path: make sure the repository root is on it.
+ROOT = Path(__file__).resolve().parents[2]
+# The controllers below are loaded by import path (``tests.evaluation.test_evaluate:...``),
+# also in spawned workers, which inherit this process's sys.path: make sure the repository root
+# is on it.
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 STEPS = 40
 TINY = ["--set", f"schedule.episode_steps={STEPS}", "--no-progress"]
 EPISODES = 3
-AGENTS = ["random", "tests.test_evaluate:FirstLegal"]
+AGENTS = ["random", "tests.evaluation.test_evaluate:FirstLegal"]
 METRICS = ["steps", "total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
            "takeoffs", "failed_takeoffs", "landings", "mean_delay_min", "collisions",
            "avoided_conflicts", "separation_losses", "contacts", "battery_depletions",
@@ -232,12 +233,12 @@ def test_help_lists_every_option(capsys):
 
 
 def _illegal_agent_class():
-    return importlib.import_module("tests.test_evaluate").IllegalAfterK
+    return importlib.import_module("tests.evaluation.test_evaluate").IllegalAfterK
 
 
 def test_illegal_action_exits_1_and_keeps_completed_episodes(tmp_path, capsys):
     _illegal_agent_class().calls = 0
-    spec = "tests.test_evaluate:IllegalAfterK"
+    spec = "tests.evaluation.test_evaluate:IllegalAfterK"
     out = tmp_path / "out"
     rc = _run(out, agents=["random", spec], report=tmp_path / "report.md")
     err = capsys.readouterr().err
@@ -258,7 +259,7 @@ def test_illegal_action_exits_1_and_keeps_completed_episodes(tmp_path, capsys):
 def test_illegal_action_with_workers_keeps_finished_episodes(tmp_path, capsys):
     # Each spawned worker counts its own calls: both finish one day, then fail.
     out = tmp_path / "out"
-    rc = _run(out, agents=["tests.test_evaluate:IllegalAfterK"], workers=2,
+    rc = _run(out, agents=["tests.evaluation.test_evaluate:IllegalAfterK"], workers=2,
               episodes=4)
     assert rc == 1
     assert "IllegalAfterK" in capsys.readouterr().err
@@ -344,7 +345,7 @@ def test_a_suite_with_fewer_episodes_keeps_its_own_first_days(tmp_path):
     ([], "--suite transfer --out"),
 ])
 def test_make_evaluate_passes_episodes_on_to_a_suite(given, expected):
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     out = subprocess.run(["make", "-n", "-o", ".venv/.installed", "evaluate", "SUITE=transfer",
                           *given], cwd=root, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
@@ -415,13 +416,13 @@ def test_agent_arguments_reach_the_worker_processes(tmp_path):
 
 
 def test_a_crashing_controller_is_reported_with_its_file_and_line(tmp_path, capsys):
-    spec = "tests.test_evaluate:CrashesOnTurnThree"
+    spec = "tests.evaluation.test_evaluate:CrashesOnTurnThree"
     assert _run(tmp_path / "out", agents=[spec]) == 1
     err = capsys.readouterr().err
     line = next(i for i, text in enumerate(Path(__file__).read_text().splitlines(), 1)
                 if "return self.turns // 0" in text)
     assert "ZeroDivisionError: integer division or modulo by zero" in err
-    assert f"raised at tests/test_evaluate.py:{line} in act" in err
+    assert f"raised at tests/evaluation/test_evaluate.py:{line} in act" in err
 
 
 @pytest.mark.parametrize("out, report, words", [

@@ -20,7 +20,7 @@ from agents.execution import INTERRUPTED, Backend, BackendError, LocalBackend  #
 from agents.execution.ray_backend import RayBackend  # noqa: E402
 from agents.sweep import parse_sweep, run_sweep  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # Ray workers import this module's functions by name
     sys.path.insert(0, str(ROOT))
 

@@ -15,7 +15,7 @@ from marl_vertiport.render import render_frame
 from marl_vertiport.sim.schema import AWAY
 from marl_vertiport.sim.physics import VEHICLE_COLOURS
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _gif(path):

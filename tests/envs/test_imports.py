@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 HEAVY = ("gymnasium", "pettingzoo", "torch", "torch_geometric", "rsl_rl", "tensordict")
 
 

@@ -236,7 +236,7 @@ def test_an_adapter_without_its_extra_fails_at_import_with_the_install_command(m
             f"try:\n    import {module}\nexcept ImportError as exc:\n    print(exc)\n"
             f"else:\n    print('imported')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=120, cwd=Path(__file__).resolve().parents[1])
+                         timeout=120, cwd=Path(__file__).resolve().parents[2])
     assert out.returncode == 0, out.stderr
     line = out.stdout.strip()
     assert line != "imported" and "\n" not in line

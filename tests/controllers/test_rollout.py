@@ -10,7 +10,7 @@ from agents.controllers.episode import run_gym_episode
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.registry import make_controller
 from agents.controllers.planner import RolloutPlanner
-from conftest import seed0_sim
+from helpers import seed0_sim
 from marl_vertiport import vertiport_v0
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import OUT_OF_SERVICE

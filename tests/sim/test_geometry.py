@@ -122,7 +122,7 @@ def test_the_simulator_and_the_rule_controllers_hand_nothing_to_blas():
     import ast
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     files = [*sorted((root / "marl_vertiport").rglob("*.py")),
              *sorted((root / "agents" / "controllers").rglob("*.py"))]
     found = []
@@ -170,7 +170,7 @@ def test_a_day_is_the_same_on_the_avx2_and_the_avx512_blas_kernels():
     for kernel in ("Haswell", "SkylakeX"):
         env = {**os.environ, "OPENBLAS_CORETYPE": kernel}
         run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             timeout=300, env=env, cwd=Path(__file__).resolve().parents[1])
+                             timeout=300, env=env, cwd=Path(__file__).resolve().parents[2])
         assert run.returncode == 0, run.stderr[-2000:]
         out[kernel] = run.stdout.strip()
     assert out["Haswell"] == out["SkylakeX"] and out["Haswell"].endswith(" 1440")

@@ -13,7 +13,7 @@ from agents.execution import (
     INTERRUPTED, RAY_EXTRA_HINT, BackendError, LocalBackend, make_backend,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # spawned workers import this module's functions by name
     sys.path.insert(0, str(ROOT))
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from conftest import busy_action
+from helpers import busy_action
 from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.spaces import ObservationBuilder

@@ -241,7 +241,7 @@ def test_custom_agent_example_runs(tmp_path):
     import sys
     from pathlib import Path
 
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     out = subprocess.run([sys.executable, "examples/custom_agent.py", "1"], cwd=root,
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
@@ -257,7 +257,7 @@ def test_the_controller_example_of_docs_controllers_md_plays_a_legal_day():
     from agents.controllers.episode import run_aec_episode
     from marl_vertiport import vertiport_v0
 
-    text = (_Path(__file__).resolve().parents[1] / "docs" / "controllers.md").read_text()
+    text = (_Path(__file__).resolve().parents[2] / "docs" / "controllers.md").read_text()
     (code,) = [block for block in _re.findall(r"```python\n(.*?)```", text, _re.S)
                if "class LandOnChargerFirst" in block]
     namespace: dict = {}

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import seed0_sim
+from helpers import seed0_sim
 
 from marl_vertiport.config import load_config
 from marl_vertiport.sim.core import VertiportSim

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import data_equivalence
 
-from conftest import busy_action
+from helpers import busy_action
 from marl_vertiport import vertiport_v0
 from marl_vertiport.gym_env import VertiportEnv
 

@@ -1,5 +1,7 @@
-"""Shared helpers: a policy that keeps the fleet busy, so long runs exercise flight, charging,
-landing and conflicts rather than a fleet parked with empty batteries."""
+"""Helpers the tests of several layers share (``from helpers import ...``: pytest puts ``tests/``
+on the import path): a policy that keeps the fleet busy, so long runs exercise flight,
+charging, landing and conflicts rather than a fleet parked with empty batteries; the paper's
+simulator in a known first state; a tiny train config."""
 
 import numpy as np
 
@@ -49,3 +51,18 @@ def seed0_sim(**overrides):
     assert sim.node.tolist() == [2, 1, 0, 7]
     assert sim.pending_time.tolist() == [16, 15, 13, 15]
     return sim
+
+
+def tiny_config(mode: str, **extra):
+    """A train config of a few PPO steps and no warm start, no evaluation; ``extra`` keys
+    replace the defaults."""
+    from agents.training.config import TrainConfig
+    from marl_vertiport.config import build_dataclass, to_dict
+
+    base = to_dict(TrainConfig())
+    base.update(mode=mode, num_envs=2, num_steps_per_env=8, iterations=2, save_interval=1,
+                critic_warmup_iterations=0,
+                pretrain={"days": 0, "epochs": 0, "batch_size": 64, "learning_rate": 1e-3},
+                evaluation={"episodes": 0, "agents": []})
+    base.update(extra)
+    return build_dataclass(TrainConfig, base)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("marl_vertiport", "agents")
 
 #: (layer, module prefixes), lowest first; a module belongs to the layer of its longest prefix.

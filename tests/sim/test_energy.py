@@ -1,5 +1,5 @@
 """The ATC's energy check (``atc.energy_check``) and the stranded-vehicle metric, on situations
-worked out by hand from seed 0 of the paper config (placement in ``conftest.seed0_sim``).
+worked out by hand from seed 0 of the paper config (placement in ``helpers.seed0_sim``).
 
 A flight covers 2 m per step at 0.5 %/m (1 % a step); a vehicle on a port stands at z = 0.15 m.
 The move of evtol_3 between neighbouring hover spots of the ring of 7 (radius 12 m), from node 7
@@ -12,7 +12,7 @@ above 12 %. The taxi of evtol_1 to the charging port (node 2) at
 import numpy as np
 import pytest
 
-from conftest import seed0_sim
+from helpers import seed0_sim
 
 from marl_vertiport.sim.schema import HOVERING, ON_PORT, OUT_OF_SERVICE
 from marl_vertiport.sim.energy import leg_energy_pct

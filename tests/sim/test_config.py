@@ -101,7 +101,7 @@ def test_base_key_extends_a_config(tmp_path):
 
 
 def test_readme_lists_every_shipped_config():
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     for path in ALL_CONFIGS:
         assert f"| `{path.stem}` |" in readme, f"README.md does not list configs/env/{path.name}"
 

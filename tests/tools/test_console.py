@@ -102,7 +102,7 @@ def test_a_typo_in_a_controller_spec_names_what_is_missing(tmp_path, spec, messa
 
 
 def test_the_example_controller_loads_from_the_checkout_through_the_console_command(tmp_path):
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     result = console("evaluate", "--agents", "examples.custom_agent:ChargeFirst", "--configs",
                      "paper", "--episodes", "1", "--set", "schedule.episode_steps=8",
                      "--workers", "1", "--no-progress", "--out", str(tmp_path / "out"), cwd=root)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from conftest import busy_action
+from helpers import busy_action
 from marl_vertiport import IllegalActionError, vertiport_v0
 from marl_vertiport.sim.invariants import violations
 
