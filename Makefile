@@ -100,6 +100,7 @@ bench: $(STAMP)  ## measure env, physics, vector, inference and training speed (
 	$(CLI) bench --out runs/bench --report docs/performance.md
 
 bench-compare: $(STAMP)  ## the env under the dispatcher's traffic here and in the checkout BASE=path (a git worktree of another commit): medians of 5 interleaved replays and their ratio
+	@test -n "$(BASE)" || { echo "make bench-compare: give BASE=path, a checkout of the commit to compare with (git worktree add /tmp/base <commit>)" >&2; exit 2; }
 	$(PY) -m agents.bench.compare --base $(BASE)
 
 env-demo: $(STAMP)  ## run one day of the env with random legal actions and print its metrics

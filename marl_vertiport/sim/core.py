@@ -249,8 +249,7 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
         if not self.uncertainty.noisy_observations:
             self.obs_xy = self.pos[:, :2]  # a view of the positions, as after a step
 
-    # ================================================================== bookkeeping helpers
-    # ================================================================== masks
+    # ================================================================== turns
     def has_decision(self, v: int) -> bool:
         return self.status[v] != AWAY and self.status[v] != OUT_OF_SERVICE
 
@@ -386,10 +385,7 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
         lost_min = float(np.sum(self.minute - self.lost_min[self.lost]))
         return self.metrics.summary(self.completed_delay + self.delay, lost_min)
 
-    # ================================================================== action effects
-    # ================================================================== safety
-    # ================================================================== motion
-    # ================================================================== measurement
+    # ================================================================== clock and noise
     def _update_delays(self) -> None:
         """Minutes since each pending operation's time, and the delay (that lateness beyond the
         tolerance, else 0), shape ``(N,)``."""
@@ -399,6 +395,5 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
     def _draw_observation_noise(self) -> None:
         self.obs_xy = self.uncertainty.observed_xy(self.rng, self.pos[:, :2])
 
-    # ================================================================== graph features
     def close(self) -> None:
         self.physics.close()

@@ -175,3 +175,15 @@ def test_the_folder_checks_catch_a_loop_and_a_mixed_folder():
                                                  "agents.controllers"]
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+MAX_LINES = 500
+
+
+def test_no_python_file_over_500_lines():
+    """One job per file: a file past 500 lines holds several, and goes by concern."""
+    files = [p for d in (*PACKAGES, "tests", "examples") for p in (ROOT / d).rglob("*.py")]
+    assert len(files) > 100, "the walk found too few files to mean anything"
+    long = {str(p.relative_to(ROOT)): n for p in files
+            if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"files over {MAX_LINES} lines: {long}"
