@@ -10,7 +10,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # so `examples`
 
 from agents.controllers.base import CHARGING_PORT, Observation
 from agents.evaluate import main as evaluate
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 
 
 class ChargeFirst:
@@ -33,7 +33,7 @@ class ChargeFirst:
 
 
 if __name__ == "__main__":
-    env, agent = vertiport_v0.env(config="paper"), ChargeFirst()
+    env, agent = vertiport_v1.env(config="paper"), ChargeFirst()
     env.reset(seed=0)
     for name in env.agent_iter():
         observation, reward, termination, truncation, info = env.last()

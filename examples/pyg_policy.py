@@ -18,7 +18,7 @@ from torch_geometric.nn import GCNConv, global_mean_pool
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # so `agents` imports
 
 from agents.controllers.episode import run_aec_episode  # noqa: E402
-from marl_vertiport import vertiport_v0  # noqa: E402
+from marl_vertiport import vertiport_v1  # noqa: E402
 from marl_vertiport.graph import to_graph_batch  # noqa: E402
 from marl_vertiport.sim.schema import (  # noqa: E402
     EVTOL_FEATURES, LEADING_ACTIONS, PORT_FEATURES, SELF_FEATURES, TRAILING_ACTIONS,
@@ -78,7 +78,7 @@ class PygController:
 if __name__ == "__main__":
     days = int(sys.argv[1]) if len(sys.argv) > 1 else 1
     for config in ("paper", "mid"):  # one set of weights, two vertiports
-        env = vertiport_v0.env(config=config)
+        env = vertiport_v1.env(config=config)
         for seed in range(days):
             m = run_aec_episode(env, PygController(), seed=seed)
             print(f"{config}, seed {seed}: {m['steps']} legal decisions, total reward "

@@ -20,9 +20,9 @@ from marl_vertiport.config import ConfigError, load_config, to_dict
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
-    env = vertiport_v0.env(config=args.config)
+    env = vertiport_v1.env(config=args.config)
     rng = np.random.default_rng(args.seed)
     for episode in range(args.episodes):
         env.reset(seed=args.seed + episode)
@@ -50,7 +50,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _info(args: argparse.Namespace) -> int:
     from marl_vertiport.sim.schema import EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES
-    from marl_vertiport.vertiport_v0 import raw_env
+    from marl_vertiport.vertiport_v1 import raw_env
 
     env = raw_env(config=args.config)
     sim = env.sim

@@ -1,7 +1,9 @@
-"""The fully centralised ATC as a single Gymnasium agent: ``"marl_vertiport/Vertiport-v0"``.
+"""The fully centralised ATC as a single Gymnasium agent: ``"marl_vertiport/Vertiport-v1"``
+(:class:`VertiportEnv`; ``"marl_vertiport/Vertiport-v0"``, :class:`VertiportEnvV0`, keeps the
+rules of version 0 bit for bit).
 
 Description:
-    The same simulator as :mod:`marl_vertiport.vertiport_v0`. At every step the agent acts
+    The same simulator as :mod:`marl_vertiport.vertiport_v1` (``-v0``: ``vertiport_v0``). At every step the agent acts
     for the eVTOL whose turn it is; the observation is that eVTOL's observation in the AEC env
     (same graphs, same ``action_mask``), and the reward is that eVTOL's reward.
 
@@ -27,6 +29,7 @@ Arguments:
     ``config``, ``render_mode`` and keyword overrides, as in the AEC env.
 
 Version History:
+    v1: the separation check and airspace procedures of ``vertiport_v1``.
     v0: initial release.
 """
 
@@ -37,7 +40,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from marl_vertiport.config import EnvConfig
+from marl_vertiport.config import LATEST_RULES, EnvConfig
 from marl_vertiport.render import render_frame
 from marl_vertiport.spaces import LegalDiscrete
 from marl_vertiport.world import make_world
@@ -47,11 +50,13 @@ class VertiportEnv(gym.Env):
     """Single-agent (fully centralised) vertiport env; see the module docstring."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 8}
+    #: The rules version (marl_vertiport/config/rules.py).
+    RULES = LATEST_RULES
 
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
         world = make_world(config, render_mode, self.metadata["render_modes"],
-                           type(self).__name__, **overrides)
+                           type(self).__name__, self.RULES, **overrides)
         self.config, self.sim, self._builder = world.config, world.sim, world.builder
         self.render_mode = render_mode
         self._started = False
@@ -99,3 +104,9 @@ class VertiportEnv(gym.Env):
 
     def close(self) -> None:
         self.sim.close()
+
+
+class VertiportEnvV0(VertiportEnv):
+    """``"marl_vertiport/Vertiport-v0"``: :class:`VertiportEnv` under the rules of version 0."""
+
+    RULES = 0

@@ -1,4 +1,4 @@
-"""The Gymnasium id ``marl_vertiport/Vertiport-v0``, registered without importing Gymnasium
+"""The Gymnasium ids ``marl_vertiport/Vertiport-v1`` (the latest rules) and ``-v0``, registered without importing Gymnasium
 before it is needed.
 
 ``import marl_vertiport`` (and so ``import marl_vertiport.sim``) loads no RL library. The id is
@@ -16,20 +16,25 @@ import importlib.util
 import sys
 from typing import Any
 
-__all__ = ["ENV_ID", "register", "register_when_gymnasium_loads"]
+__all__ = ["ENV_ID", "ENV_IDS", "register", "register_when_gymnasium_loads"]
 
-ENV_ID = "marl_vertiport/Vertiport-v0"
+#: The latest version's id.
+ENV_ID = "marl_vertiport/Vertiport-v1"
+#: Every version's id and its env class.
+ENV_IDS = {"marl_vertiport/Vertiport-v1": "marl_vertiport.gym_env:VertiportEnv",
+           "marl_vertiport/Vertiport-v0": "marl_vertiport.gym_env:VertiportEnvV0"}
 
 
 def register() -> None:
-    """Register the single-agent env under :data:`ENV_ID` (once). No order-enforcing or checker
+    """Register the single-agent env under every id of :data:`ENV_IDS` (once). No order-enforcing or checker
     wrappers: Gymnasium's wrappers do not forward the env's own methods (``state()``,
     ``action_masks()``), and the env enforces the order itself."""
     import gymnasium
 
-    if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point="marl_vertiport.gym_env:VertiportEnv",
-                           order_enforce=False, disable_env_checker=True)
+    for env_id, entry_point in ENV_IDS.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(id=env_id, entry_point=entry_point, order_enforce=False,
+                               disable_env_checker=True)
 
 
 class _Loader(importlib.abc.Loader):

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from marl_vertiport.config import (
-    EnvConfig, UnexpectedKeywordError, UnknownKeyError, load_config,
+    EnvConfig, UnexpectedKeywordError, UnknownKeyError, load_config, with_rules,
 )
 from marl_vertiport.render import draw_scenery
 from marl_vertiport.sim.core import VertiportSim
@@ -25,10 +25,11 @@ class World:
 
 
 def make_world(config: str | EnvConfig | dict | None, render_mode: str | None,
-               render_modes: list[str], owner: str, /, **overrides: Any) -> World:
+               render_modes: list[str], owner: str, rules: int, /, **overrides: Any) -> World:
     """Validate ``render_mode`` against ``render_modes``, load the config with ``overrides``
-    (the keywords of the env ``owner``, a class name for errors), and build the simulator
-    (pybullet's window for ``"human"`` where a display exists).
+    (the keywords of the env ``owner``, a class name for errors) under the rules of version
+    ``rules`` (:func:`~marl_vertiport.config.with_rules`), and build the simulator (pybullet's
+    window for ``"human"`` where a display exists).
 
     Raises:
         ValueError: an unknown render mode.
@@ -44,6 +45,7 @@ def make_world(config: str | EnvConfig | dict | None, render_mode: str | None,
         if exc.keyword is None:  # a key of the config file or dict itself
             raise
         raise UnexpectedKeywordError.of(owner, exc) from None
+    cfg = with_rules(cfg, rules)
     sim = VertiportSim(cfg, gui=render_mode == "human" and display_available())
     builder = ObservationBuilder(sim)
     if sim.physics.gui:

@@ -38,14 +38,19 @@ def busy_action(obs: dict, rng: np.random.Generator) -> int:
     return int(legal[0]) if legal.size == 1 else len(mask) - 2  # continue in transit
 
 
-def seed0_sim(**overrides):
+def seed0_sim(rules: int = 0, **overrides):
     """The paper config after ``reset(default_rng(0))``, whose placement the hand-computed tests
     rely on: evtol_0 on the charging port (node 2), evtol_1 on normal port 1, evtol_2 on normal
-    port 0, evtol_3 at hover spot 7; take-offs at minutes 16, 15, 13, evtol_3's landing at 15."""
-    from marl_vertiport.config import load_config
+    port 0, evtol_3 at hover spot 7; take-offs at minutes 16, 15, 13, evtol_3's landing at 15.
+
+    Under the rules v0 by default: the hand-built situations of the paper's mechanics (reward
+    terms, schedule, battery, energy check) move vehicles by hand, which the separation check of
+    v1 would refuse or which leave its reservations stale; tests/sim/test_clearance.py builds
+    the situations of v1."""
+    from marl_vertiport.config import load_config, with_rules
     from marl_vertiport.sim.core import VertiportSim
 
-    sim = VertiportSim(load_config("paper", **overrides))
+    sim = VertiportSim(with_rules(load_config("paper", **overrides), rules))
     sim.reset(np.random.default_rng(0))
     assert sim.status.tolist() == [ON_CHARGER, ON_PORT, ON_PORT, HOVERING]
     assert sim.node.tolist() == [2, 1, 0, 7]

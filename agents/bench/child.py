@@ -34,9 +34,9 @@ def training(iterations: int) -> dict:
 def env_memory() -> dict:
     import numpy as np
 
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
-    env = vertiport_v0.env()
+    env = vertiport_v1.env()
     env.reset(seed=0)
     for _ in env.agent_iter(1440):
         obs, *_ = env.last()

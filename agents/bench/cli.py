@@ -37,7 +37,9 @@ from typing import Any
 
 from agents.common.provenance import provenance
 from agents.common.files import write_atomic
-from agents.bench.env import bench_env, bench_fleet_sizes, bench_traffic, fleet_size_figure
+from agents.bench.env import (
+    bench_env, bench_fleet_sizes, bench_separation_check, bench_traffic, fleet_size_figure,
+)
 from agents.bench.learning import bench_env_memory, bench_inference, bench_training, bench_vector
 from agents.bench.overhead import bench_api_floor, bench_profile
 from agents.bench.planner import bench_planner
@@ -70,6 +72,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.bench") ->
     print("benchmarking (each part in turn) ...", file=sys.stderr)
     results["traffic"] = bench_traffic([c for c in args.configs if c in ("paper", "large")] or args.configs[:1],
                                        args.traffic_agents, args.traffic_days, args.repeats)
+    results["separation_check"] = bench_separation_check(args.traffic_days, args.repeats)
     results["fleet_sizes"] = bench_fleet_sizes(args.traffic_days, max(1, args.repeats // 2))
     figure = (Path(args.report).with_name("performance_fleet.png") if args.report
               else Path(args.out) / "performance_fleet.png")

@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.bench.comp
     parser.add_argument("--seed", type=int, default=2000, help="first day's seed (default: 2000)")
     parser.add_argument("--out", type=Path, default=None, help="also write the result as JSON")
     args = parser.parse_args(argv)
-    if not (args.base / "marl_vertiport" / "vertiport_v0.py").is_file():
+    if not (args.base / "marl_vertiport" / "vertiport_v1.py").is_file():
         print(f"error: --base {args.base}: not a checkout of this project", file=sys.stderr)
         return 2
     result = compare(args.base, args.agent, args.config, args.days, args.repeats, args.seed)

@@ -22,9 +22,9 @@ def record_traffic(agent: str, config: Any, days: int, seed: int) -> list[list[i
     env: the traffic that :func:`env_loop` replays so that only the env is timed."""
     from agents.controllers.episode import run_aec_episode
     from agents.controllers.registry import make_controller
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
-    env = vertiport_v0.env(config=config)
+    env = vertiport_v1.env(config=config)
     out = []
     for d in range(days):
         actions: list[int] = []
@@ -49,9 +49,9 @@ def env_loop(api: str, config: str, steps: int, seed: int,
     if traffic is not None and api != "aec":
         raise ValueError("recorded traffic is replayed through the AEC env")
     if api == "aec":
-        from marl_vertiport import vertiport_v0
+        from marl_vertiport import vertiport_v1
 
-        env = vertiport_v0.env(config=config)
+        env = vertiport_v1.env(config=config)
         env.reset(seed=seed)
         physics = env.unwrapped.sim.physics
         physics.engine_seconds, physics.engine_steps = 0.0, 0
@@ -211,6 +211,29 @@ def bench_traffic(configs: list[str], agents: list[str], days: int, repeats: int
 FLEET_SIZES = (("4 eVTOLs (paper)", "paper", {}), ("8 eVTOLs (wide)", "wide", {}),
                ("16 eVTOLs (large)", "large", {}),
                ("32 eVTOLs (fleet40 layout)", "fleet40", {"fleet_size": 32}))
+
+
+def bench_separation_check(days: int, repeats: int, config: str = "paper",
+                           seed: int = 2000) -> dict[str, Any]:
+    """AEC steps per second under the dispatcher's traffic with the separation check on (rules
+    v1) and off (rules v0), ``repeats`` interleaved replays each of its own recorded ``days``
+    days (the check changes what the dispatcher does, so each side replays its own traffic);
+    medians and the check's cost ``1 - on / off``."""
+    from marl_vertiport.config import load_config, with_rules
+
+    cfgs = {"on": load_config(config), "off": with_rules(load_config(config), 0)}
+    traffic = {k: record_traffic("heuristic", c, days, seed) for k, c in cfgs.items()}
+    rates: dict[str, list[float]] = {"on": [], "off": []}
+    for _ in range(repeats):
+        for k, cfg in cfgs.items():
+            steps = sum(len(day) for day in traffic[k])
+            run = env_loop("aec", cfg, steps, seed, traffic=traffic[k])
+            rates[k].append(run["steps"] / run["elapsed_s"])
+    on, off = statistics.median(rates["on"]), statistics.median(rates["off"])
+    print(f"  separation check on {on:8.0f} steps/s, off {off:8.0f} steps/s "
+          f"(cost {100 * (1 - on / off):.1f} %)", file=sys.stderr)
+    return {"config": config, "days": days, "seed": seed, "repeats": repeats,
+            "on_steps_per_s": on, "off_steps_per_s": off, "cost": 1.0 - on / off}
 
 
 def bench_fleet_sizes(days: int, repeats: int, seed: int = 2200) -> list[dict[str, Any]]:

@@ -23,7 +23,7 @@ def api_floor_loop(api: str, steps: int, actions: int = 14, agents: int = 4) -> 
     import gymnasium
     from pettingzoo import AECEnv
 
-    from marl_vertiport.vertiport_v0 import OrderEnforcing, reset_agent_dicts
+    from marl_vertiport.vertiport_v1 import OrderEnforcing, reset_agent_dicts
 
     obs = {"action_mask": np.ones(actions, dtype=np.int8)}
     rng = np.random.default_rng(0)

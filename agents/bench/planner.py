@@ -44,9 +44,9 @@ def planner_loop(config: str, decisions: int, seed: int,
     the engine calls are recorded and ``spans`` lists the index range of each timed call."""
     from agents.controllers.episode import run_episode
     from agents.controllers.registry import make_controller
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
-    env = vertiport_v0.env(config=config)
+    env = vertiport_v1.env(config=config)
     timed = _TimedPlanner(make_controller("rollout"), recorder)
     metrics = run_episode(env, timed, seed, max_steps=decisions)
     env.close()

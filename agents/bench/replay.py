@@ -2,7 +2,7 @@
 script of its own (``python agents/bench/replay.py TRAFFIC.json --config paper``) so that it can
 time the env of another checkout (``PYTHONPATH=<checkout>``; :mod:`agents.bench.compare`).
 
-It imports nothing of ``agents`` and of the env only ``marl_vertiport.vertiport_v0.env``, and
+It imports nothing of ``agents`` and of the env only ``marl_vertiport.vertiport_v1.env``, and
 prints one line of JSON: ``{"steps": ..., "seconds": ..., "steps_per_s": ..., "env": <the
 marl_vertiport file that ran>}``. ``TRAFFIC.json`` holds ``{"config": ..., "seed": ...,
 "days": [[action, ...], ...]}`` (day ``d`` starts from ``seed + d``).
@@ -20,9 +20,9 @@ def replay(traffic: dict) -> dict:
     """Every day of ``traffic`` through a new AEC env: reset, then each recorded action in turn
     (the episode's end stepped with ``None``); the time of the loop alone."""
     import marl_vertiport
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
-    env = vertiport_v0.env(config=traffic["config"])
+    env = vertiport_v1.env(config=traffic["config"])
     steps = 0
     pc = time.perf_counter
     elapsed = 0.0

@@ -196,6 +196,14 @@ def report(results: dict[str, Any]) -> str:
         lines += [f"Made with {describe(results['provenance'])} (`provenance` in "
                   "`bench.json`).", ""]
     lines += _traffic_lines(results.get("traffic") or [])
+    check = results.get("separation_check")
+    if check:
+        lines += ["## The separation check's cost", "",
+                  f"The dispatcher's traffic on `{check['config']}` ({check['days']} days from seed "
+                  f"{check['seed']}, median of {check['repeats']} interleaved replays each): "
+                  f"{check['on_steps_per_s']:,.0f} AEC steps/s with the separation check (rules "
+                  f"v1), {check['off_steps_per_s']:,.0f} without (rules v0): the check costs "
+                  f"{100 * check['cost']:.1f} % (target: at most 10 %).", ""]
     lines += _target_lines(results)
     lines += _profile_lines(results)
     lines += _fleet_and_planner_lines(results)

@@ -161,11 +161,13 @@ def tasks_of(result: ResultSet, rows: list[dict[str, str]]) -> list:
     from agents.evaluate.settings import EpisodeTask
 
     tasks = []
+    # The env's rules the set was made under (sets from before the record named them: v0).
+    rules = int((result.provenance.get("env") or {}).get("rules", 0))
     for row in rows:
         point = {k: _grid_value(result, k, row[k]) for k in result.grid}
         overrides = tuple({**result.overrides, **point}.items())
         tasks.append(EpisodeTask(row["agent"], row["config"], int(row["episode"]),
-                                 int(row["seed"]), overrides))
+                                 int(row["seed"]), overrides, rules))
     return tasks
 
 

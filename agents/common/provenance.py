@@ -5,7 +5,7 @@ Every result file the tools write (evaluation, suites, sweeps, learning curves, 
 records :func:`provenance`, so a reader can tell whether a shipped result was made with the
 shipped checkpoint and the committed code (``tests/tools/test_shipped_results.py`` checks it)::
 
-    {"code": {"commit": "3f2c...", "dirty": false},
+    {"code": {"commit": "3f2c...", "dirty": false}, "env": {"rules": 1},
      "checkpoints": {"gcn": {"path": "agents/checkpoints/gcn_default.pt", "sha256": "9a1e..."}},
      "machine": {"cpu": "AMD EPYC ...", "cores": 2, "python": "3.11.7", "platform": "Linux-..."}}
 
@@ -106,7 +106,10 @@ def provenance(agents: Iterable[str] = ()) -> dict[str, Any]:
         entries = [{"path": _shown(f), "sha256": file_sha256(f) if Path(f).is_file() else None}
                    for f in files]
         checkpoints[spec] = entries[0] if len(entries) == 1 else entries
-    return {"code": code_version(), "checkpoints": checkpoints, "machine": machine()}
+    from marl_vertiport.config import LATEST_RULES
+
+    return {"code": code_version(), "env": {"rules": LATEST_RULES}, "checkpoints": checkpoints,
+            "machine": machine()}
 
 
 def describe(record: dict[str, Any]) -> str:

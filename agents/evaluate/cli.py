@@ -30,7 +30,6 @@ import sys
 from pathlib import Path
 from typing import Iterable, Sequence
 
-
 from agents.common.seeds import parse_seed_range
 from agents.controllers.registry import agent_help
 from agents.evaluate.settings import (
@@ -42,6 +41,7 @@ from agents.evaluate.run import evaluate, validate
 from agents.evaluate.tables import format_table
 from agents.evaluate.report import write_outputs
 from agents.execution import Backend, BackendError, add_backend_arguments, backend_from_args
+from marl_vertiport.config import LATEST_RULES, RULES_VERSIONS
 
 # ============================================================================ CLI
 
@@ -70,6 +70,9 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
                         help="evaluate on seeds START .. STOP-1 instead (validation seeds "
                              "800000-999999 for development, test seeds >= 1000000 for "
                              "reported numbers; training seeds are refused)")
+    parser.add_argument("--rules", type=int, default=LATEST_RULES, choices=RULES_VERSIONS,
+                        help=f"the env's rules version: vertiport_v{{N}} (default "
+                             f"{LATEST_RULES}; 0: no separation check)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
                         help="local backend: worker processes, 1 runs in this process; ray "
                              "backend: the CPUs of the Ray instance it starts when it joins no "
@@ -181,7 +184,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         settings = EvalSettings(agents=_unique(agents), configs=_unique(configs),
                                 episodes=episodes, first_seed=first_seed,
                                 overrides=parse_overrides(args.overrides),
-                                bootstrap=args.bootstrap, bootstrap_seed=args.bootstrap_seed)
+                                bootstrap=args.bootstrap, bootstrap_seed=args.bootstrap_seed,
+                                rules=args.rules)
         if args.workers < 1:
             raise InputError(f"--workers must be >= 1, got {args.workers}")
         if args.ray_address and args.backend != "ray":

@@ -17,24 +17,27 @@ from agents.controllers.registry import make_controller
 from agents.evaluate.settings import EpisodeRecord, EpisodeTask, EvalSettings, Overrides
 from agents.execution import Backend, LocalBackend
 from agents.execution.base import raised_at
+from marl_vertiport.config import LATEST_RULES
 
 # ============================================================================ worker side
 
-_ENV_CACHE: dict[tuple[str, str], Any] = {}
+_ENV_CACHE: dict[tuple[str, str, int], Any] = {}
 
 
-def cached_env(config: str, overrides: Overrides) -> Any:
-    """The AEC env of a case, built once per process (each holds its own pybullet client)."""
-    from marl_vertiport import vertiport_v0
+def cached_env(config: str, overrides: Overrides, rules: int = LATEST_RULES) -> Any:
+    """The AEC env (``vertiport_v{rules}``) of a case, built once per process (each holds its
+    own pybullet client)."""
+    import importlib
 
-    key = (config, repr(overrides))
+    key = (config, repr(overrides), rules)
     if key not in _ENV_CACHE:
-        _ENV_CACHE[key] = vertiport_v0.env(config=config, **dict(overrides))
+        module = importlib.import_module(f"marl_vertiport.vertiport_v{rules}")
+        _ENV_CACHE[key] = module.env(config=config, **dict(overrides))
     return _ENV_CACHE[key]
 
 
-def _drop_env(config: str, overrides: Overrides) -> None:
-    env = _ENV_CACHE.pop((config, repr(overrides)), None)
+def _drop_env(config: str, overrides: Overrides, rules: int) -> None:
+    env = _ENV_CACHE.pop((config, repr(overrides), rules), None)
     if env is not None:
         env.close()
 
@@ -62,11 +65,11 @@ def run_task(task: EpisodeTask) -> EpisodeRecord:
     """Run one episode with a fresh controller; errors come back in the record, not raised."""
     start = time.perf_counter()
     try:
-        env = cached_env(task.config, task.overrides)
+        env = cached_env(task.config, task.overrides, task.rules)
         controller = make_controller(task.agent)
         metrics = run_aec_episode(env, controller, seed=task.seed)
     except Exception as exc:  # an illegal action (ValueError), or a controller that crashed
-        _drop_env(task.config, task.overrides)  # the env stopped mid-episode
+        _drop_env(task.config, task.overrides, task.rules)  # the env stopped mid-episode
         if isinstance(exc, ValueError):
             error = str(exc)
         else:

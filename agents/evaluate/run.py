@@ -67,6 +67,7 @@ def evaluate(settings: EvalSettings, workers: int = 1, progress: bool = True,
     if action_names is None:
         action_names = validate(settings)
     made_with = provenance(settings.agents)  # the code and checkpoints as they are now
+    made_with["env"] = {"rules": settings.rules}
     start = time.perf_counter()
     try:
         records, error = run_episodes(settings, backend or LocalBackend(workers), progress)

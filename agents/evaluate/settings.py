@@ -11,6 +11,7 @@ import yaml
 
 from agents.common.seeds import evaluation_seeds, seeds_rule
 from agents.execution.base import INTERRUPTED  # noqa: F401 (the error of a run stopped with Ctrl-C)
+from marl_vertiport.config import LATEST_RULES
 
 DEFAULT_AGENTS = ("random", "fcfs", "heuristic")
 #: The paper's case 1 (no uncertainty) and case 2 (wind gusts, charger and take-off failures).
@@ -78,6 +79,8 @@ class EvalSettings:
     first_seed: int | None = None
     """Seeds ``first_seed .. first_seed + episodes - 1`` (``--seeds``) instead of
     ``EVAL_SEEDS[:episodes]``."""
+    rules: int = LATEST_RULES
+    """The env's rules version (``--rules``; ``vertiport_v{rules}``)."""
 
     @property
     def seeds(self) -> tuple[int, ...]:
@@ -90,7 +93,7 @@ class EvalSettings:
 
     def tasks(self) -> list[EpisodeTask]:
         """Every episode to run, in (agent, case, episode) order."""
-        return [EpisodeTask(agent, config, k, seed, self.overrides)
+        return [EpisodeTask(agent, config, k, seed, self.overrides, self.rules)
                 for agent in self.agents for config in self.configs
                 for k, seed in enumerate(self.seeds)]
 
@@ -112,6 +115,8 @@ class EpisodeTask:
     episode: int
     seed: int
     overrides: Overrides = ()
+    rules: int = LATEST_RULES
+    """The env's rules version (``vertiport_v{rules}``; results made before v1 replay with 0)."""
 
 
 @dataclass

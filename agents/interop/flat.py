@@ -39,7 +39,7 @@ class FlatObservation(BaseWrapper):
     """An AEC wrapper whose observations are ``{"action_mask", "observations"[, "state"]}``.
 
     Args:
-        env: the vertiport AEC env (``vertiport_v0.env(...)`` or ``raw_env(...)``).
+        env: the vertiport AEC env (``vertiport_v1.env(...)`` or ``raw_env(...)``).
         with_state: also put the flattened ``env.state()`` in every observation.
     """
 

@@ -37,13 +37,13 @@ from typing import Any
 from agents.interop import require
 from agents.interop.flat import FlatObservation
 from agents.interop.nets import mlp, symlog
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 
 __all__ = ["ENV_NAME", "MODULE_ID", "MaskedActorCritic", "env_creator", "make_env",
            "ppo_config", "register"]
 
 EXTRA = "rllib"
-ENV_NAME = "marl_vertiport/vertiport_v0"
+ENV_NAME = "marl_vertiport/vertiport_v1"
 MODULE_ID = "shared"
 
 require("ray.rllib", EXTRA)
@@ -60,8 +60,8 @@ from ray.rllib.env.wrappers.pettingzoo_env import PettingZooEnv  # noqa: E402
 
 def make_env(config: Any = "paper", *, with_state: bool = True, **overrides: Any) -> PettingZooEnv:
     """RLlib's ``PettingZooEnv`` over the flattened AEC env; ``overrides`` as in
-    ``vertiport_v0.env``."""
-    return PettingZooEnv(FlatObservation(vertiport_v0.env(config=config, **overrides),
+    ``vertiport_v1.env``."""
+    return PettingZooEnv(FlatObservation(vertiport_v1.env(config=config, **overrides),
                                          with_state=with_state))
 
 

@@ -37,7 +37,7 @@ from torch import nn
 
 from agents.interop import require
 from agents.interop.nets import mlp, symlog
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 
 __all__ = ["ACTING", "ACTION", "ACTION_MASK", "GROUP", "LOG_PROB", "OBSERVATION", "VALUE",
            "make_actor", "make_critic", "make_env", "ppo"]
@@ -60,11 +60,11 @@ REWARD = (GROUP, "reward")
 
 def make_env(config: Any = "paper", *, seed: int | None = None, return_state: bool = True,
              **overrides: Any):
-    """The AEC env (``vertiport_v0.env``) behind TorchRL's ``PettingZooWrapper``, all agents in
-    the group ``"evtol"``; ``overrides`` as in ``vertiport_v0.env``."""
+    """The AEC env (``vertiport_v1.env``) behind TorchRL's ``PettingZooWrapper``, all agents in
+    the group ``"evtol"``; ``overrides`` as in ``vertiport_v1.env``."""
     from torchrl.envs import PettingZooWrapper
 
-    aec = vertiport_v0.env(config=config, **overrides)
+    aec = vertiport_v1.env(config=config, **overrides)
     with warnings.catch_warnings():  # TorchRL's notice that it was tested with another PettingZoo
         warnings.filterwarnings("ignore", message="PettingZoo in TorchRL is tested")
         return PettingZooWrapper(env=aec, use_mask=True, categorical_actions=True,

@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None, prog: str = PROG) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
     from marl_vertiport.config import ConfigError
 
     out = args.out or Path("runs/render") / f"{args.agent.replace(':', '_').replace('.', '_')}_{Path(str(args.config)).stem}.gif"
@@ -168,7 +168,7 @@ def _run(args: argparse.Namespace) -> int:
         raise RenderError(str(exc)) from None
     _check_output(out)
     try:
-        env = vertiport_v0.env(config=args.config, render_mode="rgb_array")
+        env = vertiport_v1.env(config=args.config, render_mode="rgb_array")
     except ConfigError as exc:
         raise RenderError(str(exc)) from None
     try:

@@ -25,7 +25,7 @@ import numpy as np
 from agents.controllers.episode import run_episode
 from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from agents.common.seeds import VALIDATION_SEED_BASE, parse_seed_range
-from marl_vertiport import ConfigError, vertiport_v0
+from marl_vertiport import ConfigError, vertiport_v1
 from marl_vertiport.sim.schema import ON_CHARGER
 
 
@@ -48,7 +48,7 @@ def charger_day(agent: str, config: str, fleet_size: int, seed: int,
                 overrides: dict | None = None) -> ChargerDay:
     """Run one day of ``agent`` and account for the charging ports' minutes and energy: before
     each step, who is on each charger and in what state; after it, the battery they gained."""
-    env = vertiport_v0.env(config=config, fleet_size=fleet_size, **(overrides or {}))
+    env = vertiport_v1.env(config=config, fleet_size=fleet_size, **(overrides or {}))
     sim = env.unwrapped.sim
     chargers = sim._charging_nodes.tolist()
     day = ChargerDay(seed=seed, fleet_size=fleet_size)

@@ -22,7 +22,7 @@ from pathlib import Path
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.controllers.episode import run_aec_episode
 from agents.controllers.registry import make_controller
-from marl_vertiport import ConfigError, vertiport_v0
+from marl_vertiport import ConfigError, vertiport_v1
 from marl_vertiport.sim.invariants import violations
 
 #: Every uncertainty well above the paper's 5 %.
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.studies.so
         print("error: --days must be >= 2 (the first ones warm up)", file=sys.stderr)
         return 2
     try:
-        envs = {c: vertiport_v0.env(config=c, **HIGH) for c in args.configs}
+        envs = {c: vertiport_v1.env(config=c, **HIGH) for c in args.configs}
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -163,7 +163,7 @@ class MultiAgentVecEnv(_VertiportVecEnv):
                  lost_vehicle_penalty: float = 0.0, rows: str = "agents",
                  critic: str = "state", reward_scale: float = 1.0,
                  conflict_penalty: float = 0.0) -> None:
-        from marl_vertiport.vertiport_v0 import raw_env
+        from marl_vertiport.vertiport_v1 import raw_env
 
         if rows not in self.ROWS:
             raise ValueError(f"rows must be one of {self.ROWS}, got {rows!r}")

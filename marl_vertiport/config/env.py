@@ -75,7 +75,10 @@ class FlightConfig:
     hover_altitude_m: float = 4.0
     """Altitude of hover spots and of moves between ports and hover spots."""
     transit_altitude_m: float = 8.0
-    """Altitude of departures to and arrivals from the airspace boundary."""
+    """Altitude of departures to the airspace boundary (and, under rules v0, of arrivals)."""
+    arrival_altitude_m: float = 12.0
+    """Rules v1: altitude of arrivals, from the holding slot to above the hover spot, a layer
+    apart from departures so that the two flows never meet (rules v0: the transit altitude)."""
     avoid_altitudes_m: tuple[float, ...] = (12.0, 16.0)
     """Altitude layers used by the "avoid collision" action, lowest free layer first."""
     vehicle_size_m: float = 1.0
@@ -173,6 +176,25 @@ class ATCConfig:
     ``energy_reserve_pct``, covers the whole flight (without gusts). False (paper): no check."""
     energy_reserve_pct: float = 5.0
     """Battery an energy-checked flight must have left over (covers gusts), percent."""
+    separation_check: bool = True
+    """Rules v1: clear a flight only if its protected volume clears every other vehicle's
+    reserved volume (:mod:`marl_vertiport.sim.clearance`); arrivals hold in slots of their own.
+    False (rules v0, the paper): no check."""
+    horizontal_buffer_m: float = 1.0
+    """Rules v1: horizontal distance two protected volumes keep beyond
+    ``safety.min_separation_m`` (where their altitude ranges are closer than the vertical
+    threshold)."""
+    vertical_buffer_m: float = 0.5
+    """Rules v1: vertical distance two protected volumes keep beyond ``safety.min_separation_m``
+    (where they are closer horizontally than the horizontal threshold); small enough that
+    flight layers 4 m apart and a move at 4 m above a parked vehicle (3.85 m) stay clear."""
+    along_track_margin_m: float = 2.0
+    """Rules v1: each segment of a protected volume extends this far behind its start, and a
+    reversing gust pushes a vehicle back no farther (one step of flight at cruise speed)."""
+    holding_slots: int = 0
+    """Rules v1: holding slots at the airspace boundary, at the arrival altitude; 0: one per
+    vehicle (at least one per destination), as many as fit ``2 x`` the horizontal threshold
+    apart."""
 
 
 @dataclass(frozen=True)
@@ -352,6 +374,13 @@ def _validate(cfg: EnvConfig) -> None:
     _check(un.position_noise_std_m >= 0, "uncertainty.position_noise_std_m", "must be >= 0")
     reserve = cfg.atc.energy_reserve_pct
     _check(0 <= reserve <= 100, "atc.energy_reserve_pct", f"must lie in [0, 100], got {reserve}")
+    atc = cfg.atc
+    for name in ("horizontal_buffer_m", "vertical_buffer_m", "along_track_margin_m"):
+        _check(getattr(atc, name) >= 0, f"atc.{name}", f"must be >= 0, got {getattr(atc, name)}")
+    _check(atc.holding_slots >= 0, "atc.holding_slots", f"must be >= 0, got {atc.holding_slots}")
+    _check(fl.arrival_altitude_m > fl.vehicle_height_m, "flight.arrival_altitude_m",
+           f"must be above the vehicle's height ({fl.vehicle_height_m:g} m), got "
+           f"{fl.arrival_altitude_m:g}")
 
 
 def from_dict(data: dict[str, Any]) -> EnvConfig:

@@ -34,6 +34,7 @@ import numpy as np
 
 from marl_vertiport.config import EnvConfig
 from marl_vertiport.sim.battery import BatteryModel
+from marl_vertiport.sim.clearance import Clearance
 from marl_vertiport.sim.energy import FlightEnergy
 from marl_vertiport.sim.features import Features
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
@@ -57,7 +58,7 @@ __all__ = ["IllegalActionError", "VertiportSim"]
 #: Index of the first node action ("go to node 0"): the action layout of sim/schema.py.
 _NODES = LEADING_ACTIONS
 
-_SHARED = frozenset({int, float, bool, str, type(None)})
+_SHARED = frozenset({int, float, bool, str, tuple, type(None)})  # tuples: of numbers
 
 
 def _copied(value: Any) -> Any:
@@ -86,7 +87,7 @@ def _copied(value: Any) -> Any:
     return copy.deepcopy(value)
 
 
-class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features):
+class VertiportSim(Legality, Clearance, Lifecycle, Motion, Separation, Stranding, Features):
     """One vertiport, its fleet, and the round-robin ATC turn.
 
     This class holds the state of the day and the order of a step; each concern of the step is
@@ -142,6 +143,7 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
         self.energy = FlightEnergy(config, self.layout)
         # Battery a hovering vehicle spends until its next turn (at most a full round).
         self._hold_pct = config.battery.hover_drain_pct * self.n
+        self._init_clearance()
         # Everything set so far is fixed for the env's life; what follows is episode state,
         # which snapshot() copies.
         self._static_keys = frozenset(self.__dict__) | {"_static_keys"}
@@ -184,6 +186,15 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
         self.obs_xy = np.zeros((n, 2))
         self.lost = np.zeros(n, dtype=bool)  # stranded: in the air or on the ground for good
         self.lost_min = np.zeros(n)  # minute at the end of the step in which it was lost
+        # Rules v1 (sim/clearance.py): each vehicle's reserved volume (an id, -1: none), where
+        # its current segment began, its holding slot (-1: none), and the vehicles back from
+        # their destination that wait outside for a slot.
+        self.reservation = np.full(n, -1, dtype=np.int64)
+        self.reserved: list[tuple | None] = [None] * n  # the volumes the ids name
+        self.seg_from = np.zeros((n, 3))
+        self.slot_of = np.full(n, -1, dtype=np.int64)
+        self._waiting_outside: set[int] = set()
+        self._gone: set[int] = set()  # out of service outside the airspace
 
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new day: vehicles placed on random ports (then hover spots), full batteries,
@@ -215,10 +226,16 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
                 self.pending_time[v] = self.schedule.first_landing_min()
             self.dest[v] = dests[v]
         self.prev_pos[:] = self.pos
+        self.seg_from[:] = self.pos
+        if self.sep_check:
+            self._trim_memos()
+            for v in range(n):
+                self._reserve(v)
         self.physics.forget_contacts()  # nothing of the previous day's contacts carries over
         self._update_delays()
         self._refresh_conflicts()
-        self.metrics = EpisodeMetrics(action_counts=np.zeros(self.actions.n, dtype=np.int64))
+        self.metrics = EpisodeMetrics(action_counts=np.zeros(self.actions.n, dtype=np.int64),
+                                      min_separation_m=self._initial_separation_m())
         self.acting = 0
         self._choose_actor(first=True)
         self._draw_observation_noise()
@@ -246,6 +263,8 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
             if k != "_physics":
                 setattr(self, k, _copied(v))
         self.physics.set_body_states(state["_physics"])
+        if self.sep_check:  # the reservation ids name entries of this sim's memo table
+            self._reintern()
         if not self.uncertainty.noisy_observations:
             self.obs_xy = self.pos[:, :2]  # a view of the positions, as after a step
 
@@ -337,10 +356,15 @@ class VertiportSim(Legality, Lifecycle, Motion, Separation, Stranding, Features)
         info["gusts"] = gusts
         info["separation_losses"], info["contacts"] = self._measure_separation(
             status_during, start_xyz, end_xyz)
+        if self.sep_state:
+            metrics.separation_loss_min += self.minutes_per_step
         info["touchdowns"] = self._process_arrivals(end_xyz)
         if self._holding:
             for h in sorted(self._holding):
                 self._assign_hover_spot(h)
+        if self._waiting_outside:
+            for w in sorted(self._waiting_outside):
+                self._head_for_slot(w)
         failed_nodes = self.uncertainty.failed_chargers(rng, self._charging_node_list)
         info["charger_failures"] = len(failed_nodes)
         lost_before = self.metrics.stranded_air + self.metrics.stranded_ground

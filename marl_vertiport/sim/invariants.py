@@ -25,7 +25,9 @@ def violations(sim: VertiportSim, reward: float | None = None) -> list[str]:
     vehicle inside the airspace below the ground; no two vehicles on the ground inside one
     another; each port or hover spot held by at most one vehicle, consistently both ways; a
     vehicle at rest on its node exactly there; a vehicle away outside the airspace (its
-    boundary, less a rounding of 0.2 %); every vehicle's mask int8 and non-empty."""
+    boundary, less a rounding of 0.2 %); every vehicle's mask int8 and non-empty; under the
+    separation check (rules v1), no loss of separation or contact counted and no two vehicles
+    in the airspace closer than the separation."""
     out = []
     if not math.isclose(sim.minute, sim.step_count * sim.minutes_per_step, rel_tol=1e-12, abs_tol=1e-9):
         out.append(f"clock at minute {sim.minute} after {sim.step_count} steps")
@@ -58,6 +60,19 @@ def violations(sim: VertiportSim, reward: float | None = None) -> list[str]:
     radius = sim.layout.airspace_radius_m * (1 - 2e-3)
     out += [f"evtol_{v}: away {float(np.hypot(*sim.pos[v, :2])):.3f} m from the centre, inside "
             f"the airspace" for v in away if np.hypot(*sim.pos[v, :2]) < radius]
+    if sim.sep_check:  # rules v1: separation by construction
+        sep = sim.cfg.safety.min_separation_m
+        if sim.metrics.separation_losses or sim.metrics.contacts:
+            out.append(f"{sim.metrics.separation_losses} losses of separation and "
+                       f"{sim.metrics.contacts} contacts under the separation check")
+        there = [v for v in np.flatnonzero(inside).tolist()
+                 if np.hypot(*sim.pos[v, :2]) < sim.layout.airspace_radius_m]
+        for i, a in enumerate(there):
+            for b in there[i + 1:]:
+                d = float(np.sqrt(((sim.pos[a] - sim.pos[b]) ** 2).sum()))
+                if d < sep:
+                    out.append(f"evtol_{a} and evtol_{b}: {d:.3f} m apart, under the "
+                               f"separation of {sep:g} m")
     for v in range(sim.n):
         mask = sim.action_mask(v)
         if mask.dtype != np.int8 or not mask.any():

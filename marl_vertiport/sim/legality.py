@@ -6,8 +6,11 @@ to a free port; a hovering one may stay or go to a free port (a landing) or hove
 transit may continue or avoid a predicted conflict; one away continues; one out of service
 stays. On top of the paper, the ATC's energy check (``atc.energy_check``) clears only flights the
 battery can finish with ``atc.energy_reserve_pct`` to spare (:mod:`~marl_vertiport.sim.energy`),
-and lets a hovering vehicle hold only while a landing can still be cleared at its next turn.
-A check of a new kind (say, of separation) belongs here, beside the energy check.
+and lets a hovering vehicle hold only while a landing can still be cleared at its next turn; the
+separation check (``atc.separation_check``, rules v1, :mod:`~marl_vertiport.sim.clearance`)
+clears only flights whose protected volume clears every other vehicle's reservation, and an
+avoidance climb only onto a layer that clears. Staying (on the ground, hovering) and continuing
+(in flight) are always legal and safe, so no mask is ever empty.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from marl_vertiport.sim.schema import (
 
 #: Index of the first node action ("go to node 0"): the action layout of sim/schema.py.
 _NODES = LEADING_ACTIONS
+_IN_FLIGHT = (TAXIING, DEPARTING, ARRIVING)
 
 
 class IllegalActionError(ValueError):
@@ -40,7 +44,13 @@ class Legality:
             return cached
         s = self.status.item(v)
         mask = self._fixed_masks[s]
-        if mask is None:  # on the ground or hovering: the free nodes it may go to
+        if mask is None and s in _IN_FLIGHT:  # rules v1: avoid only where a layer clears
+            acts = self.actions
+            mask = np.zeros(acts.n, dtype=np.int8)
+            mask[acts.continue_] = 1
+            mask[acts.avoid] = self._avoid_plan(v) is not None
+            mask.setflags(write=False)
+        elif mask is None:  # on the ground or hovering: the free nodes it may go to
             acts = self.actions
             mask = np.zeros(acts.n, dtype=np.int8)
             mask[acts.stay] = 1
@@ -58,7 +68,13 @@ class Legality:
                 mask[_NODES:_NODES + self.layout.n_nodes] &= hop < budget
                 if s != HOVERING:
                     mask[acts.takeoff] = self.energy.trip_pct[node, self.dest.item(v)] < budget
-                else:  # hold only while a landing can still be cleared at the next turn
+            if self.sep_check:  # clear only flights whose volume clears every reservation
+                self._apply_separation_check(v, mask, s != HOVERING)
+            if atc.energy_check:
+                if s == HOVERING:  # hold only while a landing can still be cleared at the next turn
+                    node = self.node.item(v)
+                    budget = self.battery.item(v) - atc.energy_reserve_pct
+                    hop = self.energy.hop_pct[node]
                     ports = np.flatnonzero(mask[_NODES:_NODES + self.layout.n_ports])
                     if ports.size and budget - self._hold_pct <= hop[ports].min():
                         mask[acts.stay] = 0
@@ -86,6 +102,9 @@ class Legality:
         legal = {TAXIING: (acts.continue_, acts.avoid), DEPARTING: (acts.continue_, acts.avoid),
                  ARRIVING: (acts.continue_, acts.avoid), AWAY: (acts.continue_,),
                  OUT_OF_SERVICE: (acts.stay,)}
+        if self.cfg.atc.separation_check:  # in flight, avoid depends on the airspace
+            for status in _IN_FLIGHT:
+                del legal[status]
         masks: list[np.ndarray | None] = []
         for status in range(len(STATUS_NAMES)):
             if status not in legal:

@@ -8,6 +8,8 @@ next flight plan, and the emergency landing of a vehicle whose battery is empty 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from marl_vertiport.sim.energy import local_route
@@ -37,6 +39,8 @@ class Lifecycle:
         self.routes[v] = list(waypoints[1:])
         self.has_target[v] = True
         self.leg_alt[v] = leg_alt_m
+        self.seg_from[v] = self.pos[v]
+        self._reserve(v)
 
     def _local_route(self, v: int, node: int) -> list[np.ndarray]:
         """Route at hover altitude from the vehicle to vertiport node ``node``."""
@@ -62,6 +66,19 @@ class Lifecycle:
         leg there. Hold position for this step instead when no horizontal travel is left (the
         final descent onto a spot) or when every layer is taken."""
         if self.avoid_layer[v] >= 0 or not self.has_target[v]:
+            return
+        if self.sep_check:  # rules v1: the lowest layer whose volume clears (the mask's)
+            plan = self._avoid_plan(v)
+            if plan is None:
+                return
+            k, route = plan
+            if k < 0:
+                self.routes[v].insert(0, self.target[v].copy())
+                self.target[v] = self.pos[v].copy()
+                self._reserve(v)
+                return
+            self.avoid_layer[v] = k
+            self._set_route(v, route, self.cfg.flight.avoid_altitudes_m[k])
             return
         waypoints = [self.target[v]] + self.routes[v]
         horizontal = [w for w in waypoints if np.hypot(*(w[:2] - self.pos[v, :2])) > 1e-9]
@@ -99,8 +116,10 @@ class Lifecycle:
             self.physics.make_static(v, self.pos[v])
             if lay.node_type[node] == HOVER_SPOT:
                 self.status[v] = HOVERING
+                self._reserve(v)
                 return 0
             self.status[v] = ON_CHARGER if lay.node_type[node] == CHARGING_PORT else ON_PORT
+            self._reserve(v)
             if self.landing_cleared[v]:
                 self.landing_cleared[v] = False
                 self.pending_kind[v] = PENDING_TAKEOFF
@@ -119,10 +138,13 @@ class Lifecycle:
             return 0
         if s == AWAY and not self.returning[v]:
             self.returning[v] = True
+            if self.sep_check:  # rules v1: to a holding slot of its own, or wait out here
+                self._head_for_slot(v)
+                return 0
             entry = lay.boundary_point(np.zeros(2), self.pos[v, :2])
             # Aim slightly inside the boundary so the re-entry is unambiguous.
             entry = entry * (1.0 - 1e-3)
-            alt = cfg.flight.transit_altitude_m
+            alt = cfg.flight.arrival_altitude_m
             self._set_route(v, [np.array([entry[0], entry[1], alt])], alt)
             return 0
         if s == AWAY:
@@ -135,18 +157,53 @@ class Lifecycle:
             return 0
         return 0
 
+    def _head_for_slot(self, v: int) -> None:
+        """Rules v1: send vehicle ``v``, away at its destination, to the nearest free holding
+        slot that clears every reservation (reserved from now), or let it wait where it is."""
+        slot = self._free_slot(v)
+        if slot < 0:
+            self._waiting_outside.add(v)
+            self.has_target[v] = False
+            return
+        self._waiting_outside.discard(v)
+        self.slot_of[v] = slot
+        self._set_route(v, self._route_to_slot(v, slot), self.arrival_alt_m)
+
+    def _route_to_slot(self, v: int, slot: int) -> list[np.ndarray]:
+        """Waypoints from vehicle ``v`` outside the airspace to holding slot ``slot``, at the
+        arrival altitude: around the airspace (at least 5 % outside its boundary, 30 degrees of
+        bearing at most a leg, so no leg cuts inside it), then straight in on the slot's
+        bearing."""
+        alt = self.arrival_alt_m
+        x, y = float(self.pos[v, 0]), float(self.pos[v, 1])
+        radius = max(math.hypot(x, y), 1.05 * self.layout.airspace_radius_m)
+        sx, sy = float(self.slot_pos[slot, 0]), float(self.slot_pos[slot, 1])
+        here, there = math.atan2(y, x), math.atan2(sy, sx)
+        turn = (there - here + math.pi) % (2.0 * math.pi) - math.pi
+        legs = max(1, math.ceil(abs(turn) / (math.pi / 6.0)))
+        route = [np.array([radius * math.cos(here + turn * k / legs),
+                           radius * math.sin(here + turn * k / legs), alt])
+                 for k in range(1 if legs else 0, legs + 1)]
+        return route + [self.slot_pos[slot].copy()]
+
     def _assign_hover_spot(self, v: int) -> None:
-        """Send an arriving vehicle to the free hover spot nearest to it, or hold it."""
+        """Send an arriving vehicle to the free hover spot nearest to it, or hold it (rules
+        v1: among the spots whose arrival route clears every reservation; it holds in its
+        slot)."""
         lay = self.layout
         free = np.flatnonzero((lay.node_type == HOVER_SPOT) & (self.node_occupant == -1))
+        if self.sep_check and free.size:
+            free = self._clear_hover_spots(v, free)
         if free.size == 0:
             self._holding.add(v)  # holds at the boundary until a spot frees up
+            self._reserve(v)
             return
         self._holding.discard(v)
+        self.slot_of[v] = -1
         d = np.linalg.norm(lay.node_xy_m[free] - self.pos[v, :2], axis=1)
         node = int(free[np.argmin(d)])
         self._occupy(v, node)
-        alt = self.cfg.flight.transit_altitude_m
+        alt = self.cfg.flight.arrival_altitude_m
         nx, ny = lay.node_xy_m[node]
         self._set_route(v, [np.array([nx, ny, alt]), self._node_pos[node].copy()], alt)
         self.physics.make_dynamic(v)
@@ -168,6 +225,18 @@ class Lifecycle:
         self._release(v)
         inside = self.status[v] != AWAY
         self.status[v] = OUT_OF_SERVICE
+        if self.sep_check:  # rules v1: it gives up its slot and never leaves the ground
+            self.slot_of[v] = -1
+            self._holding.discard(v)
+            self._waiting_outside.discard(v)
+            if inside:
+                self.pos[v, 2] = self.park_z_m
+                self.pos[v, :2] = self._clear_landing_xy(v)
+                self.physics.make_static(v, self.pos[v])
+            else:  # down outside the airspace: out of the ATC's picture, as a vehicle away
+                self._gone.add(v)
+            self._reserve(v)
+            return
         if inside:
             self.pos[v, 2] = self.park_z_m
             d = np.linalg.norm(self.layout.node_xy_m - self.pos[v, :2], axis=1)
@@ -186,18 +255,20 @@ class Lifecycle:
         here = self.pos[v, :2].copy()
         grounded = [u for u in range(self.n) if u != v and self.pos[u, 2] <= self.park_z_m + 1e-6
                     and self.status[u] != AWAY]
-        if not grounded:
+        if not grounded and not self.sep_check:
             return here
-        others = self.pos[grounded, :2]
+        others = self.pos[grounded, :2] if grounded else np.full((1, 2), np.inf)
         clear = self._touch_m
-        if np.linalg.norm(others - here, axis=1).min() >= clear:
+        if np.linalg.norm(others - here, axis=1).min() >= clear and (
+                not self.sep_check or self._landing_point_clear(v, here)):
             return here
         radius = self.layout.airspace_radius_m
         bearings = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
-        for ring in range(1, 4 * self.n + 2):
+        for ring in range(1, 4 * self.n + 2 + (8 * int(radius) if self.sep_check else 0)):
             points = here + ring * clear * np.column_stack([np.cos(bearings), np.sin(bearings)])
             ok = (np.linalg.norm(points[:, None] - others[None], axis=2).min(axis=1) >= clear) \
                 & (np.linalg.norm(points, axis=1) < radius)
-            if ok.any():
-                return points[np.flatnonzero(ok)[0]]
+            for k in np.flatnonzero(ok).tolist():
+                if not self.sep_check or self._landing_point_clear(v, points[k]):
+                    return points[k]
         return here  # pragma: no cover - a full airspace; cannot happen with a valid layout

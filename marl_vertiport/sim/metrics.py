@@ -2,7 +2,10 @@
 defined once for the simulator, the evaluation and the training logs.
 
 The paper reports total reward, mean battery, good take-offs and landings, delay and collisions
-(section IV); the rest are ours (docs/environment.md, section 9). :class:`EpisodeMetrics` holds
+(section IV); the rest are ours (docs/environment.md, section 9). ``min_separation_m`` is the
+smallest centre distance of two vehicles in the airspace over the day (swept over each step; NaN
+for a day with fewer than two), ``separation_loss_min`` the minutes in which some pair was in
+loss of separation. :class:`EpisodeMetrics` holds
 an episode's running totals; its :meth:`~EpisodeMetrics.summary` has exactly the keys of
 :data:`METRICS`, in that order, plus ``action_counts``.
 """
@@ -10,6 +13,7 @@ an episode's running totals; its :meth:`~EpisodeMetrics.summary` has exactly the
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,7 +48,9 @@ METRICS: dict[str, MetricInfo] = {
     "collisions": MetricInfo("collisions", better=-1, logged=True),
     "avoided_conflicts": MetricInfo("avoided conflicts"),
     "separation_losses": MetricInfo("separation losses", better=-1, logged=True),
-    "contacts": MetricInfo("contacts"),
+    "min_separation_m": MetricInfo("min separation (m)", "metres", +1, True),
+    "separation_loss_min": MetricInfo("loss of separation (min)", "minutes per day", -1, True),
+    "contacts": MetricInfo("contacts", better=-1, logged=True),
     "battery_depletions": MetricInfo("depletions", better=-1, logged=True),
     "stranded_air": MetricInfo("lost in the air", better=-1, logged=True),
     "stranded_ground": MetricInfo("lost on the ground", better=-1, logged=True),
@@ -73,6 +79,8 @@ class EpisodeMetrics:
     collisions: int = 0
     avoided_conflicts: int = 0
     separation_losses: int = 0
+    min_separation_m: float = math.inf
+    separation_loss_min: float = 0.0
     contacts: int = 0
     battery_depletions: int = 0
     stranded_air: int = 0
@@ -100,6 +108,9 @@ class EpisodeMetrics:
             "collisions": self.collisions,
             "avoided_conflicts": self.avoided_conflicts,
             "separation_losses": self.separation_losses,
+            "min_separation_m": (float(self.min_separation_m) if math.isfinite(self.min_separation_m)
+                                 else math.nan),
+            "separation_loss_min": float(self.separation_loss_min),
             "contacts": self.contacts,
             "battery_depletions": self.battery_depletions,
             "stranded_air": self.stranded_air,

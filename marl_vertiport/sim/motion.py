@@ -48,6 +48,10 @@ class Motion:
         targets = self.target.tolist()
         pos, cmd_vel = self.pos, self.cmd_vel
         radius = self.layout.airspace_radius_m
+        # Rules v1: a reversing gust pushes a vehicle back along its segment no farther than
+        # the margin behind the segment's start (its protected volume, sim/clearance.py).
+        seg_from = self.seg_from.tolist() if self.sep_check and keep is not None else None
+        margin = self.margin_m
         end = list(start)
         bodies, body_vel, body_keep = [], [], []
         for k, v in enumerate(moving):
@@ -63,6 +67,14 @@ class Motion:
                 # The ground stops a reversing gust: a vehicle climbing from its pad is pushed
                 # back down to the pad at most, never below it.
                 f = (park_z - pz) / (vel[2] * dt)
+            if f < 0.0 and seg_from is not None and status[v] != AWAY:
+                sx, sy, sz = seg_from[v]
+                ux, uy, uz = tx - sx, ty - sy, tz - sz
+                seg_m = math.sqrt(ux * ux + uy * uy + uz * uz)
+                fly_m = math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2]) * dt
+                if seg_m > 1e-9 and fly_m > 1e-12:
+                    along = ((px - sx) * ux + (py - sy) * uy + (pz - sz) * uz) / seg_m
+                    f = max(f, (-margin - along) / fly_m)
             if status[v] == AWAY:
                 nx, ny, nz = px + vel[0] * dt * f, py + vel[1] * dt * f, pz + vel[2] * dt * f
                 r = math.hypot(nx, ny)
@@ -99,9 +111,13 @@ class Motion:
         for v in self._moved:
             p, t = end[v], targets[v]
             if max(abs(p[0] - t[0]), abs(p[1] - t[1]), abs(p[2] - t[2])) >= 1e-6:
+                if self.sep_check:
+                    self._advance_reservation(v, p, t)
                 continue
             if self.routes[v]:
+                self.seg_from[v] = self.target[v]
                 self.target[v] = self.routes[v].pop(0)
+                self._reserve(v)
                 continue
             self.has_target[v] = False
             touchdowns += self._finish_leg(v)

@@ -10,6 +10,8 @@ engine's bodies.
 
 from __future__ import annotations
 
+import math
+
 from marl_vertiport.sim.safety import conflicting_pairs, planned_velocity, swept_distances_m
 from marl_vertiport.sim.schema import AWAY, IN_TRANSIT_INSIDE
 
@@ -52,6 +54,18 @@ class Separation:
                                       self.cfg.safety.min_separation_m):
             self.conflict[a] = self.conflict[b] = True
 
+    def _initial_separation_m(self) -> float:
+        """Smallest centre distance of two vehicles in the airspace now (inf for fewer than two)."""
+        inside = [v for v in range(self.n) if self.status.item(v) != AWAY and v not in self._gone]
+        best = float("inf")
+        pos = self.pos.tolist()
+        for i, a in enumerate(inside):
+            for b in inside[i + 1:]:
+                d = math.dist(pos[a], pos[b])
+                if d < best:
+                    best = d
+        return best
+
     def _measure_separation(self, status: list[int], start: list[list[float]],
                             end: list[list[float]]) -> tuple[int, int]:
         """New losses of separation (swept over the step) and new engine contacts.
@@ -69,6 +83,8 @@ class Separation:
         if n < 2 or not movers:
             return 0, 0
         present = [s != AWAY for s in status]
+        for v in self._gone:  # rules v1: down outside the airspace
+            present[v] = False
         mover_set = set(movers)
         # Every pair of present vehicles with a mover in it, in sorted order.
         if len(movers) == 1:
@@ -86,6 +102,9 @@ class Separation:
         new_losses = len(losses - self.sep_state)
         self.sep_state = kept | losses
         self.metrics.separation_losses += new_losses
+        closest = min(dmin)
+        if closest < self.metrics.min_separation_m:
+            self.metrics.min_separation_m = closest
         # Engine contacts: those left at the end of the step, and those resolved within its
         # substeps (a deflected body and a vehicle that came within touching distance of it).
         contacts = set(self.physics.contact_pairs())

@@ -10,7 +10,7 @@ from agents.controllers.fcfs import FCFSController
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.registry import AgentSpecError, make_controller
 from agents.common.seeds import EVAL_SEEDS
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import EVTOL_FEATURES
 
@@ -99,7 +99,7 @@ def _hold_obs(batteries: list[float], statuses: list[int], free_nodes: set[int],
               nodes: list[int]) -> dict:
     """A hand-built observation on the paper's real layout (node positions from the env) for
     the dispatcher's holding rules: vehicle 0 acts; ``nodes`` gives each vehicle's node."""
-    env = vertiport_v0.env(config="paper")
+    env = vertiport_v1.env(config="paper")
     env.reset(seed=0)
     positions = env.unwrapped.sim.port_features()[:, 2:]
     env.close()
@@ -140,7 +140,7 @@ def test_holding_moves_keep_clear_of_the_ports():
     # From hover spot 4 (beside the charger), spot 5 is the next nearest to the charger, but
     # the straight path between them passes within 4 m of the charging port: it goes to spot
     # 3, whose path keeps clear (or stays if there is no such spot).
-    env = vertiport_v0.env(config="paper")
+    env = vertiport_v1.env(config="paper")
     env.reset(seed=0)
     xy = env.unwrapped.sim.port_features()[:, 2:]
     env.close()
@@ -187,7 +187,7 @@ def test_dispatcher_counts_holding_vehicles_as_waiting_for_the_charger():
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 @pytest.mark.parametrize("name", ["fcfs", "heuristic"])
 def test_full_days_with_only_legal_actions(config, name):
-    env = vertiport_v0.env(config=config)
+    env = vertiport_v1.env(config=config)
     metrics = run_aec_episode(env, make_controller(name), EVAL_SEEDS[0])  # raises if illegal
     assert metrics["steps"] == 1440 and metrics["completed_trips"] >= 1
 
@@ -199,14 +199,14 @@ def test_ordering_random_fcfs_heuristic_on_fixed_seeds():
     for name in ("random", "fcfs", "heuristic"):
         rewards = []
         for config in ("paper", "paper_uncertain"):
-            env = vertiport_v0.env(config=config)
+            env = vertiport_v1.env(config=config)
             rewards += [run_aec_episode(env, make_controller(name), s)["total_reward"] for s in seeds]
         means[name] = np.mean(rewards)
     assert means["random"] < means["fcfs"] < means["heuristic"], means
 
 
 def test_the_same_controller_runs_through_both_apis():
-    aec = run_aec_episode(vertiport_v0.env(config="paper", **{"schedule.episode_steps": 200}),
+    aec = run_aec_episode(vertiport_v1.env(config="paper", **{"schedule.episode_steps": 200}),
                           make_controller("heuristic"), 5)
     gym = run_gym_episode(VertiportEnv(config="paper", **{"schedule.episode_steps": 200}),
                           make_controller("heuristic"), 5)
@@ -220,7 +220,7 @@ def test_illegal_action_from_a_controller_is_named():
         def act(self, observation):
             return 13  # avoid collision: illegal for a parked vehicle
 
-    env = vertiport_v0.env()
+    env = vertiport_v1.env()
     with pytest.raises(ValueError, match=r"'stubborn' returned the illegal action 13 for evtol_0"):
         run_aec_episode(env, Stubborn(), 0)
 
@@ -255,14 +255,14 @@ def test_the_controller_example_of_docs_controllers_md_plays_a_legal_day():
     from pathlib import Path as _Path
 
     from agents.controllers.episode import run_aec_episode
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
     text = (_Path(__file__).resolve().parents[2] / "docs" / "controllers.md").read_text()
     (code,) = [block for block in _re.findall(r"```python\n(.*?)```", text, _re.S)
                if "class LandOnChargerFirst" in block]
     namespace: dict = {}
     exec(compile(code, "docs/controllers.md", "exec"), namespace)
-    metrics = run_aec_episode(vertiport_v0.env(config="paper_uncertain"),
+    metrics = run_aec_episode(vertiport_v1.env(config="paper_uncertain"),
                               namespace["LandOnChargerFirst"](), seed=3)
     assert metrics["steps"] == 1440
 
@@ -274,11 +274,11 @@ def test_pyg_example_acts_legally_on_two_vertiports_through_to_graph_batch():
 
     from agents.controllers.episode import run_aec_episode
     from examples.pyg_policy import PygController, PygPolicy
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
     from marl_vertiport.graph import to_graph_batch
 
     for config in ("paper", "mid"):
-        env = vertiport_v0.env(config=config, schedule__episode_steps=120)
+        env = vertiport_v1.env(config=config, schedule__episode_steps=120)
         metrics = run_aec_episode(env, PygController(), seed=0)  # illegal actions would raise
         assert metrics["steps"] == 120
         env.reset(seed=1)
@@ -293,7 +293,7 @@ def test_pyg_example_acts_legally_on_two_vertiports_through_to_graph_batch():
 def test_every_illegal_action_message_lists_the_legal_actions_one_way():
     """The env's three refusals (wrong type, out of range, masked out) and the evaluation's
     check of a controller list the legal actions alike: ``index (name)``, comma-separated."""
-    env = vertiport_v0.env()
+    env = vertiport_v1.env()
     env.reset(seed=0)
     obs = env.observe(env.agent_selection)
     sim = env.unwrapped.sim
@@ -313,7 +313,7 @@ def test_every_illegal_action_message_lists_the_legal_actions_one_way():
             return illegal
 
     with pytest.raises(ValueError) as exc:
-        run_aec_episode(vertiport_v0.env(), Stubborn(), 0)
+        run_aec_episode(vertiport_v1.env(), Stubborn(), 0)
     messages.append(str(exc.value))
     assert all(m.endswith(legal) for m in messages), messages
     assert "[" not in legal and "'" not in legal

@@ -32,7 +32,7 @@ def test_checkpoint_with_non_finite_weights_is_refused_naming_the_weight(tmp_pat
 
 def _observations(n: int = 12) -> list[dict]:
     """AEC observations with a choice (two or more legal actions) from a random day of `paper`."""
-    from marl_vertiport.vertiport_v0 import raw_env
+    from marl_vertiport.vertiport_v1 import raw_env
 
     env = raw_env(config="paper")
     env.reset(seed=5)

@@ -42,7 +42,7 @@ def warm_up() -> str:
     """Imports what an episode needs, so that a node's first task is not much slower than the
     others'; returns the node it ran on."""
     import agents.evaluate.episodes  # noqa: F401
-    import marl_vertiport.vertiport_v0  # noqa: F401
+    import marl_vertiport.vertiport_v1  # noqa: F401
 
     return ray.get_runtime_context().get_node_id()
 

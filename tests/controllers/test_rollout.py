@@ -11,7 +11,7 @@ from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.registry import make_controller
 from agents.controllers.planner import RolloutPlanner
 from helpers import seed0_sim
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import OUT_OF_SERVICE
 
@@ -123,7 +123,7 @@ def test_planner_beats_the_dispatcher_it_rolls_out():
 
 
 def test_rollouts_run_on_the_nominal_model_unless_asked_otherwise():
-    env = vertiport_v0.env(config="paper_uncertain")
+    env = vertiport_v1.env(config="paper_uncertain")
     env.reset(seed=3)
     sim = env.unwrapped.sim
     assert sim.cfg.uncertainty.wind_gust_prob > 0  # the premise: the env has uncertainties

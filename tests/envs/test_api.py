@@ -8,34 +8,34 @@ from pettingzoo import AECEnv
 from pettingzoo.test import api_test, render_test, seed_test
 
 import marl_vertiport  # noqa: F401  (registers the Gymnasium id)
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 
 
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 def test_pettingzoo_api(config):
-    api_test(vertiport_v0.env(config=config), num_cycles=300)
+    api_test(vertiport_v1.env(config=config), num_cycles=300)
 
 
 def test_pettingzoo_seed():
-    seed_test(lambda: vertiport_v0.env(config="paper_uncertain"), num_cycles=200)
+    seed_test(lambda: vertiport_v1.env(config="paper_uncertain"), num_cycles=200)
 
 
 @pytest.mark.filterwarnings("ignore:render_mode='human' needs a display:UserWarning")
 def test_pettingzoo_render():
-    render_test(lambda render_mode=None: vertiport_v0.env(render_mode=render_mode))
+    render_test(lambda render_mode=None: vertiport_v1.env(render_mode=render_mode))
 
 
 @pytest.mark.filterwarnings("ignore:.*Box observation space m.*:UserWarning")
 @pytest.mark.filterwarnings("ignore:render_mode='human' needs a display:UserWarning")
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 def test_gymnasium_check_env(config):
-    env = gymnasium.make("marl_vertiport/Vertiport-v0", config=config).unwrapped
+    env = gymnasium.make("marl_vertiport/Vertiport-v1", config=config).unwrapped
     check_env(env, skip_render_check=False)
 
 
 def test_gymnasium_make_and_episode_end():
-    env = gymnasium.make("marl_vertiport/Vertiport-v0", config="paper",
+    env = gymnasium.make("marl_vertiport/Vertiport-v1", config="paper",
                          **{"schedule.episode_steps": 30})
     obs, info = env.reset(seed=3)
     assert "agent" in info
@@ -49,7 +49,7 @@ def test_gymnasium_make_and_episode_end():
 
 
 def test_rgb_frame_shows_the_scene():
-    env = vertiport_v0.env(render_mode="rgb_array")
+    env = vertiport_v1.env(render_mode="rgb_array")
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (360, 480, 3) and frame.dtype == np.uint8
@@ -62,7 +62,7 @@ def test_human_mode_without_display_warns_and_runs(monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     with pytest.warns(UserWarning, match="display"):
-        env = vertiport_v0.env(render_mode="human")
+        env = vertiport_v1.env(render_mode="human")
     env.reset(seed=0)
     assert env.render() is None
     env.close()
@@ -70,11 +70,11 @@ def test_human_mode_without_display_warns_and_runs(monkeypatch):
 
 def test_unknown_render_mode():
     with pytest.raises(ValueError, match="render_mode"):
-        vertiport_v0.env(render_mode="ansi")
+        vertiport_v1.env(render_mode="ansi")
 
 
 def test_spaces_are_cached_and_contain_observations():
-    env = vertiport_v0.env()
+    env = vertiport_v1.env()
     env.reset(seed=1)
     agent = env.agents[0]
     assert env.observation_space(agent) is env.observation_space(agent)
@@ -103,9 +103,9 @@ def test_single_agent_sample_is_legal_and_copies_are_plain():
 def test_last_through_the_wrapper_is_the_raw_envs_last():
     from pettingzoo.utils import wrappers
 
-    env = vertiport_v0.env(config="paper_uncertain")
+    env = vertiport_v1.env(config="paper_uncertain")
     assert isinstance(env, wrappers.OrderEnforcingWrapper)
-    assert str(env) == "vertiport_v0"
+    assert str(env) == "vertiport_v1"
     with pytest.raises(AttributeError, match="before reset"):
         env.last()
     env.reset(seed=3)
@@ -124,9 +124,9 @@ def test_the_wrappers_step_and_iterator_are_pettingzoos(caplog):
     inherited ones (PettingZoo's OrderEnforcingWrapper read through __getattr__)."""
     from pettingzoo.utils import wrappers
 
-    from marl_vertiport.vertiport_v0 import raw_env
+    from marl_vertiport.vertiport_v1 import raw_env
 
-    ours, theirs = vertiport_v0.env(config="small"), wrappers.OrderEnforcingWrapper(raw_env(config="small"))
+    ours, theirs = vertiport_v1.env(config="small"), wrappers.OrderEnforcingWrapper(raw_env(config="small"))
     for env in (ours, theirs):
         with pytest.raises(AssertionError, match="before step"):
             env.step(0)
@@ -158,7 +158,7 @@ def test_api_edges_get_clear_errors():
     gymnasium.make: each either works as documented or says what to do."""
     import gymnasium
 
-    from marl_vertiport.vertiport_v0 import raw_env
+    from marl_vertiport.vertiport_v1 import raw_env
 
     raw = raw_env(config="small")
     for call in (raw.state, lambda: raw.observe("evtol_0")):
@@ -169,7 +169,7 @@ def test_api_edges_get_clear_errors():
         raw.observe("evtl_0")
     raw.close()
 
-    env = gymnasium.make("marl_vertiport/Vertiport-v0", config="small", schedule__episode_steps=2)
+    env = gymnasium.make("marl_vertiport/Vertiport-v1", config="small", schedule__episode_steps=2)
     with pytest.raises(RuntimeError, match=r"reset\(\) must be called before state"):
         env.state()
     env.reset(seed=0)
@@ -192,7 +192,7 @@ def test_one_observation_path_for_one_vehicle_and_for_rows_of_them():
     from marl_vertiport.sim.schema import EVTOL_FEATURES, SELF_FEATURES
     from marl_vertiport.spaces import ObservationBuilder
 
-    env = vertiport_v0.env(config="paper_uncertain")
+    env = vertiport_v1.env(config="paper_uncertain")
     env.reset(seed=4)
     for _ in range(37):  # into the day: vehicles flying, noise drawn
         obs = env.observe(env.agent_selection)

@@ -6,12 +6,12 @@ import torch
 from torch_geometric.data import Batch, Data
 from torch_geometric.nn import GCNConv, global_mean_pool
 
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 from marl_vertiport.graph import to_graph_batch, to_state_batch
 
 
 def collect(n: int, seed: int = 0) -> list[dict]:
-    env = vertiport_v0.env(config="paper_uncertain")
+    env = vertiport_v1.env(config="paper_uncertain")
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     out = []

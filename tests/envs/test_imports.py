@@ -33,14 +33,14 @@ def test_the_core_and_the_package_load_no_rl_library(module):
     "import gymnasium",                            # none of ours: the module:id form imports it
 ])
 def test_the_gymnasium_id_is_registered_in_any_order_of_imports(code):
-    env_id = ("marl_vertiport:marl_vertiport/Vertiport-v0" if code == "import gymnasium"
-              else "marl_vertiport/Vertiport-v0")
+    env_id = ("marl_vertiport:marl_vertiport/Vertiport-v1" if code == "import gymnasium"
+              else "marl_vertiport/Vertiport-v1")
     shown = run(f"{code}\nenv = gymnasium.make({env_id!r})\nobs, info = env.reset(seed=0)\n"
                 f"print(type(env.unwrapped).__name__, info['agent'])")
     assert shown == "VertiportEnv evtol_0"
 
 
 def test_the_pettingzoo_env_loads_pettingzoo_and_not_torch():
-    loaded = run("import sys\nfrom marl_vertiport import vertiport_v0\n"
+    loaded = run("import sys\nfrom marl_vertiport import vertiport_v1\n"
                  f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))")
     assert loaded == "['gymnasium', 'pettingzoo']"

@@ -6,7 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import data_equivalence
 
 from helpers import busy_action
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 
 
@@ -14,7 +14,7 @@ from marl_vertiport.gym_env import VertiportEnv
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 @pytest.mark.parametrize("seed", [0, 7, 123])
 def test_aec_and_single_agent_agree_over_a_full_day(config, seed):
-    aec = vertiport_v0.env(config=config)
+    aec = vertiport_v1.env(config=config)
     gym_env = VertiportEnv(config=config)
     aec.reset(seed=seed)
     gym_obs, _ = gym_env.reset(seed=seed)

@@ -179,15 +179,15 @@ def test_a_step_too_short_to_move_is_refused():
 
 
 def _make_aec(**kw):
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
-    return vertiport_v0.env(config="paper", **kw)
+    return vertiport_v1.env(config="paper", **kw)
 
 
 def _make_gym(**kw):
     import gymnasium
 
-    return gymnasium.make("marl_vertiport/Vertiport-v0", config="paper", **kw)
+    return gymnasium.make("marl_vertiport/Vertiport-v1", config="paper", **kw)
 
 
 @pytest.mark.parametrize("make", [_make_aec, _make_gym], ids=["aec", "gymnasium"])
@@ -221,10 +221,10 @@ def test_config_typos_in_a_file_or_an_override_keep_their_field_errors(tmp_path)
         load_config("paper", fleet_sise=4)
     assert "unexpected keyword" not in str(exc.value)
     # A bad value of a known key stays a plain field error, not a TypeError.
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
     with pytest.raises(ConfigError, match=r"uncertainty.wind_gust_prob: is a probability") as exc:
-        vertiport_v0.env(config="paper", **{"uncertainty.wind_gust_prob": 1.5})
+        vertiport_v1.env(config="paper", **{"uncertainty.wind_gust_prob": 1.5})
     assert not isinstance(exc.value, TypeError)
 
 

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from helpers import busy_action
-from marl_vertiport import IllegalActionError, vertiport_v0
+from marl_vertiport import IllegalActionError, vertiport_v1
 from marl_vertiport.sim.invariants import violations
 
 
 def run_day(config: str, seed: int, policy: str, check=None, **overrides) -> list:
     """Run one AEC day; return the per-step (agent, action, reward) trace."""
-    env = vertiport_v0.env(config=config, **overrides)
+    env = vertiport_v1.env(config=config, **overrides)
     env.reset(seed=seed)
     rng = np.random.default_rng(seed + 1)
     trace = []
@@ -47,7 +47,7 @@ def test_invariants_over_long_runs(config, policy):
 
 
 def test_time_advances_one_minute_per_step():
-    env = vertiport_v0.env()
+    env = vertiport_v1.env()
     env.reset(seed=0)
     sim = env.unwrapped.sim
     for t in range(50):
@@ -75,7 +75,7 @@ def test_same_seed_same_actions_bit_identical(config):
 
 
 def test_reset_without_seed_continues_the_generator():
-    env = vertiport_v0.env(config="paper_uncertain")
+    env = vertiport_v1.env(config="paper_uncertain")
     env.reset(seed=5)
     first = env.unwrapped.sim.pending_time.copy()
     rng = env.unwrapped.sim.rng
@@ -90,7 +90,7 @@ def test_reset_without_seed_continues_the_generator():
 
 @pytest.mark.parametrize("bad", [99, -1, 2.0, "takeoff", None, np.float32(1.0)])
 def test_illegal_action_through_the_aec_api_changes_nothing(bad):
-    env = vertiport_v0.env()
+    env = vertiport_v1.env()
     env.reset(seed=2)
     sim = env.unwrapped.sim
     agent = env.agent_selection
@@ -116,7 +116,7 @@ def test_illegal_action_through_the_aec_api_changes_nothing(bad):
 
 
 def test_masked_out_action_names_the_legal_set():
-    env = vertiport_v0.env()
+    env = vertiport_v1.env()
     env.reset(seed=2)
     obs = env.observe(env.agent_selection)
     illegal = int(np.flatnonzero(obs["action_mask"] == 0)[0])
@@ -130,10 +130,10 @@ def test_episode_summary_has_exactly_the_registered_metrics_in_order():
     from agents.evaluate.metrics import DIRECTION, METRIC_LABELS
     from agents.training.curves import CURVE_KEYS
     from agents.training.vec_env import LOGGED_METRICS
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
     from marl_vertiport.sim.metrics import METRICS, TRAINING_METRICS
 
-    env = vertiport_v0.env(config="small", schedule__episode_steps=20)
+    env = vertiport_v1.env(config="small", schedule__episode_steps=20)
     env.reset(seed=0)
     summary = env.unwrapped.sim.episode_metrics()
     assert list(summary) == [*METRICS, "action_counts"]

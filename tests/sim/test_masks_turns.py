@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from marl_vertiport import IllegalActionError
-from marl_vertiport.config import load_config
+from marl_vertiport.config import load_config, with_rules
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE, TAXIING,
@@ -23,8 +23,8 @@ STAY, TAKEOFF, CONTINUE, AVOID = 0, 1, 12, 13
 HOVER_FREE = [5, 6, 7, 8, 10, 11]  # 2 + spots 3, 4, 5, 6, 8, 9 (spot 7 is evtol_3's)
 
 
-def new_sim(config="paper", seed=0, **overrides) -> VertiportSim:
-    sim = VertiportSim(load_config(config, **overrides))
+def new_sim(config="paper", seed=0, rules=1, **overrides) -> VertiportSim:
+    sim = VertiportSim(with_rules(load_config(config, **overrides), rules))
     sim.reset(np.random.default_rng(seed))
     if seed == 0:
         assert sim.status.tolist() == [ON_CHARGER, ON_PORT, ON_PORT, HOVERING]
@@ -53,7 +53,9 @@ def test_masks_at_reset_with_all_ports_taken():
 
 
 def test_masks_follow_free_and_reserved_nodes():
-    sim = new_sim()
+    """Occupancy alone (rules v0: the separation check of v1 also masks the moves that cross
+    the departure, tests/sim/test_clearance.py)."""
+    sim = new_sim(rules=0)
     sim.acting = 2
     sim.step(TAKEOFF)  # port 0 is free now
     assert legal(sim, 0) == [STAY, TAKEOFF, 2]
@@ -79,8 +81,13 @@ def test_masks_follow_free_and_reserved_nodes():
     (OUT_OF_SERVICE, [STAY]),
 ])
 def test_mask_of_each_status(status, expected):
-    sim = new_sim()
+    sim = new_sim(rules=0)
     sim.status[1] = status  # evtol_1, holding port 1
+    assert legal(sim, 1) == expected
+    sim = new_sim(rules=1)
+    sim.status[1] = status
+    if status in (TAXIING, DEPARTING, ARRIVING):  # v1: no route to lift, no avoidance
+        expected = [CONTINUE]
     assert legal(sim, 1) == expected
 
 
@@ -101,7 +108,7 @@ def expected_legal(sim, v) -> list[int]:
 
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 def test_masks_match_the_rules_in_a_random_run(config):
-    sim = new_sim(config, seed=4, **{"atc.energy_check": False})
+    sim = new_sim(config, seed=4, rules=0, **{"atc.energy_check": False})
     rng = np.random.default_rng(2)
     seen = set()
     for _ in range(300):

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from marl_vertiport.config import load_config
+from marl_vertiport.config import load_config, with_rules
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import ARRIVING, AWAY, HOVERING, OUT_OF_SERVICE, TAXIING
 
@@ -13,7 +13,10 @@ SPOTS = [[-10.0, 0.0], [10.0, 0.0], [0.0, -10.0], [0.0, 10.0], [14.0, 0.0], [-14
 
 
 def make_sim(**overrides) -> VertiportSim:
-    cfg = load_config("paper", fleet_size=2, **{"layout.hover_spots_xy_m": SPOTS}, **overrides)
+    """Two vehicles on a layout of hover spots on the axes, under the rules v0 (the tests set
+    up conflicts and contacts by hand, which the separation check of v1 rules out)."""
+    cfg = with_rules(load_config("paper", fleet_size=2, **{"layout.hover_spots_xy_m": SPOTS},
+                                 **overrides), 0)
     sim = VertiportSim(cfg)
     sim.reset(np.random.default_rng(0))
     return sim

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from helpers import busy_action
-from marl_vertiport.config import load_config
+from marl_vertiport.config import load_config, with_rules
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.spaces import ObservationBuilder
 
@@ -108,7 +108,7 @@ def test_restore_around_a_contact_replays_exactly(before):
     high = {"uncertainty.wind_gust_prob": 0.3, "uncertainty.charger_failure_prob": 0.3,
             "uncertainty.takeoff_failure_prob": 0.3, "uncertainty.action_misread_prob": 0.1,
             "uncertainty.position_noise_std_m": 1.0}
-    sim = VertiportSim(load_config("mid", **high))
+    sim = VertiportSim(with_rules(load_config("mid", **high), 0))  # v0: v1 has no contacts
     choices = np.random.default_rng(0).integers(0, 1000, size=3000).tolist()
 
     def steps(picks):

@@ -146,10 +146,10 @@ def test_replaying_a_controllers_recorded_actions_reproduces_its_days():
     from agents.bench.env import record_traffic
     from agents.controllers.episode import run_aec_episode
     from agents.controllers.registry import make_controller
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
     traffic = record_traffic("heuristic", "paper_uncertain", days=2, seed=31)
-    env = vertiport_v0.env(config="paper_uncertain")
+    env = vertiport_v1.env(config="paper_uncertain")
     for d, actions in enumerate(traffic):
         played = run_aec_episode(env, make_controller("heuristic"), seed=31 + d)
 

@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from agents.interop.flat import FlatObservation, flatten
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 
 pytestmark = pytest.mark.filterwarnings(  # TorchRL's own classes, at import
     "ignore:Creating .*WeightUpdater.*deprecated:DeprecationWarning")
@@ -49,8 +49,8 @@ def _changed(before: list[torch.Tensor], module: torch.nn.Module) -> bool:
 
 
 def test_flat_observation_carries_the_graph_the_mask_and_the_state():
-    inner = vertiport_v0.env(config="paper", **SHORT)
-    env = FlatObservation(vertiport_v0.env(config="paper", **SHORT), with_state=True)
+    inner = vertiport_v1.env(config="paper", **SHORT)
+    env = FlatObservation(vertiport_v1.env(config="paper", **SHORT), with_state=True)
     inner.reset(seed=3)
     env.reset(seed=3)
     space = env.observation_space("evtol_0")
@@ -78,7 +78,7 @@ def test_flat_observation_carries_the_graph_the_mask_and_the_state():
 def test_flat_observation_passes_pettingzoo_api_test():
     from pettingzoo.test import api_test
 
-    api_test(FlatObservation(vertiport_v0.env(config="paper", **SHORT), with_state=True),
+    api_test(FlatObservation(vertiport_v1.env(config="paper", **SHORT), with_state=True),
              num_cycles=2 * STEPS)
 
 
@@ -106,7 +106,7 @@ def test_torchrl_wrapper_one_acting_agent_a_bool_mask_and_the_state(torchrl_env)
     assert acting.sum(-1).eq(1).all()                                  # one agent a step
     assert acting.float().argmax(-1).tolist() == [t % 4 for t in range(STEPS)]  # round-robin
     assert data[torchrl_env.ACTION_MASK].dtype == torch.bool
-    nested = vertiport_v0.raw_env(config="paper", **SHORT)
+    nested = vertiport_v1.raw_env(config="paper", **SHORT)
     nested.reset(seed=5)
     np.testing.assert_array_equal(data["state", "port_nodes"][0].numpy(), nested.state()["port_nodes"])
     np.testing.assert_array_equal(data[torchrl_env.ACTION_MASK][0, 0].numpy(),
@@ -251,7 +251,7 @@ def test_torchrl_gymenv_builds_the_single_agent_env_by_its_id():
 
     import marl_vertiport  # noqa: F401 (registers the id)
 
-    env = GymEnv("marl_vertiport/Vertiport-v0", categorical_action_encoding=True, **SHORT)
+    env = GymEnv("marl_vertiport/Vertiport-v1", categorical_action_encoding=True, **SHORT)
     td = env.reset(seed=0)
     legal = torch.nonzero(td["action_mask"].bool()).flatten()
     td["action"] = legal[0]

@@ -1,5 +1,5 @@
 """The wheel: it carries the env configs and the shipped checkpoint, and, installed outside the
-repository, runs ``vertiport_v0.env()`` and the ``marl-vertiport`` command."""
+repository, runs ``vertiport_v1.env()`` and the ``marl-vertiport`` command."""
 
 from __future__ import annotations
 
@@ -44,8 +44,8 @@ def test_wheel_runs_outside_the_repository(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(site)}
     work = tmp_path / "elsewhere"
     work.mkdir()
-    code = ("import marl_vertiport, agents; from marl_vertiport import vertiport_v0; "
-            "e = vertiport_v0.env(); e.reset(seed=0); "
+    code = ("import marl_vertiport, agents; from marl_vertiport import vertiport_v1; "
+            "e = vertiport_v1.env(); e.reset(seed=0); "
             "print(marl_vertiport.__file__); print(agents.__file__); print(e.unwrapped.config.name)")
     out = _run([sys.executable, "-c", code], cwd=work, env=env).stdout.split()
     assert out[0].startswith(str(site)) and out[1].startswith(str(site)), out

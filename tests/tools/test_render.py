@@ -10,7 +10,7 @@ from PIL import Image, ImageSequence
 
 from agents import render
 from agents.controllers.random_agent import RandomController
-from marl_vertiport import vertiport_v0
+from marl_vertiport import vertiport_v1
 from marl_vertiport.render import render_frame
 from marl_vertiport.sim.schema import AWAY
 from marl_vertiport.sim.physics import VEHICLE_COLOURS
@@ -26,7 +26,7 @@ def _gif(path):
 
 @pytest.fixture
 def env():
-    e = vertiport_v0.env(config="paper", render_mode="rgb_array")
+    e = vertiport_v1.env(config="paper", render_mode="rgb_array")
     yield e
     e.close()
 
@@ -193,7 +193,7 @@ def test_outcome_words():
 def test_rendering_does_not_change_the_episode():
     """The recorded episode is the evaluated one: same seed, same steps, same metrics."""
     def run(with_frames):
-        e = vertiport_v0.env(config="paper", render_mode="rgb_array")
+        e = vertiport_v1.env(config="paper", render_mode="rgb_array")
         try:
             if with_frames:
                 frames = render.record_episode(

@@ -53,7 +53,7 @@ def test_checkpoint_of_one_layout_acts_legally_a_full_day_on_others(tmp_path):
     with two chargers and on a 6-eVTOL layout with 14 nodes; every action it takes is legal
     (the env raises on an illegal one)."""
     from agents.controllers.episode import run_aec_episode
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
     small = tmp_path / "small.yaml"
     small.write_text("base: paper\nfleet_size: 3\n")
@@ -61,7 +61,7 @@ def test_checkpoint_of_one_layout_acts_legally_a_full_day_on_others(tmp_path):
                   tmp_path / "small", log=lambda *_: None, evaluate=False)
     ctl = GCNController(final)
     for config in ("mid", "twin"):
-        metrics = run_aec_episode(vertiport_v0.env(config=config), ctl, 1_000_000)
+        metrics = run_aec_episode(vertiport_v1.env(config=config), ctl, 1_000_000)
         assert metrics["steps"] == 1440
 
 def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path, capsys):

@@ -81,13 +81,15 @@ def test_refit_actor_leaves_the_warm_start_alone():
 
     actor = GCNController(SHIPPED_CHECKPOINT).actor
     before = {k: v.clone() for k, v in actor.state_dict().items()}
-    from marl_vertiport.vertiport_v0 import raw_env
+    from marl_vertiport.vertiport_v1 import raw_env
 
     env = raw_env(config="paper")
     env.reset(seed=1)
     rows = {k: [] for k in ACTOR_GROUPS}
     labels = []
     while len(labels) < 40:
+        if env.truncations[env.agent_selection]:
+            env.reset(seed=len(labels) + 2)
         obs = env.observe(env.agent_selection)
         legal = np.flatnonzero(obs["action_mask"])
         if legal.size > 1:

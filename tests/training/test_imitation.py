@@ -14,7 +14,7 @@ from agents.controllers.gcn import GCNController
 from agents.gcn.features import feature_names
 from agents.training.config import TrainConfig
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
-from marl_vertiport.vertiport_v0 import raw_env
+from marl_vertiport.vertiport_v1 import raw_env
 
 
 def test_demonstration_day_keeps_choices_with_legal_labels():

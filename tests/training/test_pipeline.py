@@ -42,9 +42,9 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     assert not list(tmp_path.glob("*.tmp"))
     ctl = GCNController(final)
     from agents.controllers.episode import run_aec_episode
-    from marl_vertiport import vertiport_v0
+    from marl_vertiport import vertiport_v1
 
-    metrics = run_aec_episode(vertiport_v0.env(**{"schedule.episode_steps": 20}), ctl, 1)
+    metrics = run_aec_episode(vertiport_v1.env(**{"schedule.episode_steps": 20}), ctl, 1)
     assert metrics["steps"] == 20
     # Resume to 3 iterations: continues from model_1 and writes model_2.
     cfg3 = build_dataclass(TrainConfig, {**to_dict(cfg), "iterations": 3})

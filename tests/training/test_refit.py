@@ -37,7 +37,7 @@ def test_refits_differ_by_seed_reproduce_per_seed_and_load(run, tmp_path):
     assert not all(torch.equal(weights[0][k], warm[k]) for k in warm)
     info = torch.load(first[0], weights_only=True)["infos"]["refit"]
     assert info["seed"] == 1 and info["samples"] > 0
-    from marl_vertiport.vertiport_v0 import raw_env
+    from marl_vertiport.vertiport_v1 import raw_env
 
     controller = GCNController(first[1])
     env = raw_env(config=controller.train_info["env_config"])

@@ -13,7 +13,7 @@ from agents.gcn.features import POLICY_GROUPS, STATE_GROUPS
 from agents.training.config import TrainConfig
 from agents.training.runner import runner_config
 from agents.training.vec_env import MultiAgentVecEnv
-from marl_vertiport.config import ConfigError, build_dataclass, to_dict
+from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict, with_rules
 
 
 def _actions_of(env: MultiAgentVecEnv, rng: np.random.Generator) -> torch.Tensor:
@@ -121,11 +121,14 @@ def test_conflict_penalty_is_charged_exactly_on_unresolved_conflicts(mode):
     metric counts), and nowhere else."""
     from agents.training.vec_env import SingleAgentVecEnv
 
+    # Rules v0: the separation check of v1 leaves no predicted conflict to penalise.
+    paper_v0 = with_rules(load_config("paper"), 0)
+
     def make(penalty):
         if mode == "multi_agent":
-            return MultiAgentVecEnv("paper", num_envs=2, seed=1, rows="turns", reward_scale=0.5,
+            return MultiAgentVecEnv(paper_v0, num_envs=2, seed=1, rows="turns", reward_scale=0.5,
                                     conflict_penalty=penalty)
-        return SingleAgentVecEnv("paper", num_envs=2, seed=1, reward_scale=0.5,
+        return SingleAgentVecEnv(paper_v0, num_envs=2, seed=1, reward_scale=0.5,
                                  conflict_penalty=penalty)
 
     plain, charged = make(0.0), make(10.0)

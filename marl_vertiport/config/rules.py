@@ -1,0 +1,33 @@
+"""The env's rules versions, as PettingZoo versions its envs: a change of behaviour is a new
+version, and the old one keeps its behaviour bit for bit.
+
+- **v1** (``vertiport_v1``, ``marl_vertiport/Vertiport-v1``; the schema's defaults): the ATC's
+  separation check and the airspace procedures of :mod:`marl_vertiport.sim.clearance`
+  (``atc.separation_check``, arrivals at ``flight.arrival_altitude_m``, holding slots).
+- **v0** (``vertiport_v0``, ``marl_vertiport/Vertiport-v0``): the rules before them: no
+  separation check, arrivals at the transit altitude. :func:`with_rules` sets those two keys
+  whatever the config says; every other key is the config's.
+"""
+
+from __future__ import annotations
+
+from marl_vertiport.config.env import EnvConfig
+from marl_vertiport.config.typed import ConfigError
+
+#: The rules versions there are; the last is the default.
+RULES_VERSIONS = (0, 1)
+LATEST_RULES = RULES_VERSIONS[-1]
+
+
+def with_rules(cfg: EnvConfig, rules: int) -> EnvConfig:
+    """``cfg`` under the rules of version ``rules`` (v1: as it is; v0: no separation check and
+    arrivals at the transit altitude)."""
+    if rules == 1:
+        return cfg
+    if rules == 0:
+        if not cfg.atc.separation_check and \
+                cfg.flight.arrival_altitude_m == cfg.flight.transit_altitude_m:
+            return cfg
+        return cfg.replace(**{"atc.separation_check": False,
+                              "flight.arrival_altitude_m": cfg.flight.transit_altitude_m})
+    raise ConfigError(f"rules: version {rules!r} does not exist; known: {list(RULES_VERSIONS)}")

@@ -1,0 +1,454 @@
+"""The ATC's separation check (``atc.separation_check``, rules v1): clearances reserve space, not
+time, so no clearance can bring two aircraft within ``safety.min_separation_m``.
+
+Every vehicle inside the airspace holds a *reservation*, the protected volume of what it was
+cleared for: a vehicle in flight, its leg from where its current segment began to the leg's end;
+a vehicle at rest (on a pad, at a hover spot, holding, out of service), the point where it
+stands; a vehicle returning from its destination, its holding slot. A volume is a chain of
+straight segments, each vertical or level (the only legs the simulator flies), each extended
+behind its start by ``atc.along_track_margin_m``: a vehicle moves only along its segment, and a
+reversing gust pushes it back along it no farther than that margin (:mod:`~.motion` stops it
+there, as the ground stops a climb pushed down).
+
+Two volumes are *clear* when every pair of their segments is at least
+``H = min_separation_m + atc.horizontal_buffer_m`` apart horizontally (the distance of their
+plan-view projections) or has altitude ranges at least ``V = min_separation_m +
+atc.vertical_buffer_m`` apart. Any point of one is then at least the separation from any point
+of the other (a 3-D distance is at least its horizontal and its vertical part), at every moment,
+however gusts delay either vehicle. With the shipped numbers (H = 4 m, V = 3.5 m) flight layers
+4 m apart are clear of each other, and so is a move at 4 m of a vehicle parked below it (3.85 m),
+while a climb or a descent needs 4 m of plan-view distance from everything at its altitudes.
+
+A clearance (a take-off, a move to a node, an avoidance climb, a hover spot for an arriving
+vehicle, a holding slot) is legal only if its volume clears every other vehicle's reservation;
+the action mask says so (:meth:`Clearance.mask_reasons` says why an action is masked).
+
+Procedures (docs/environment.md, section 6): departures climb on their pad and leave on their
+destination's bearing at the transit altitude; arrivals come back at ``flight.arrival_altitude_m``
+(a layer above) to a holding slot of their own on the airspace boundary, and go from there to a
+hover spot when the route clears. Emergency landings come down outside every reserved volume.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from marl_vertiport.sim.energy import local_route
+from marl_vertiport.sim.layout import HOVER_SPOT
+from marl_vertiport.sim.schema import (
+    ARRIVING, AWAY, DEPARTING, HOVERING, LEADING_ACTIONS, OUT_OF_SERVICE, STATUS_NAMES, TAXIING,
+)
+
+#: A segment of a volume: plan-view start and end, and the altitude range it spans,
+#: ``(ax, ay, bx, by, z_low, z_high)`` in metres (margins applied).
+Segment = tuple[float, float, float, float, float, float]
+Volume = tuple[Segment, ...]
+
+_NODES = LEADING_ACTIONS
+_FLYING = (TAXIING, DEPARTING, ARRIVING)
+_EPS = 1e-9
+#: Entries kept in a memo of pure volume tests before it is emptied (bounds memory on long runs).
+_MEMO_MAX = 20_000
+
+
+def volume(start, waypoints, margin_m: float, floor_z_m: float) -> Volume:
+    """The protected volume of a flight from ``start`` through ``waypoints`` (``(x, y, z)`` each):
+    one segment per leg, extended ``margin_m`` behind its start along its direction (a vertical
+    leg in altitude, no lower than ``floor_z_m``). A flight without waypoints is the point
+    ``start``."""
+    x0, y0, z0 = (float(c) for c in start)
+    if not waypoints:
+        return ((x0, y0, x0, y0, z0, z0),)
+    segs = []
+    for w in waypoints:
+        x1, y1, z1 = (float(c) for c in w)
+        h = math.hypot(x1 - x0, y1 - y0)
+        if h > _EPS:  # a level leg (every horizontal leg flown is level)
+            ax, ay = x0 - (x1 - x0) / h * margin_m, y0 - (y1 - y0) / h * margin_m
+            segs.append((ax, ay, x1, y1, min(z0, z1), max(z0, z1)))
+        elif z1 > z0 + _EPS:  # a climb: the margin below its start
+            segs.append((x0, y0, x1, y1, max(z0 - margin_m, floor_z_m), z1))
+        elif z1 < z0 - _EPS:  # a descent: the margin above its start
+            segs.append((x0, y0, x1, y1, z1, z0 + margin_m))
+        else:
+            segs.append((x0, y0, x0, y0, z0, z0))
+        x0, y0, z0 = x1, y1, z1
+    return tuple(segs)
+
+
+def _point_segment_sq(px, py, ax, ay, bx, by) -> float:
+    dx, dy = bx - ax, by - ay
+    dd = dx * dx + dy * dy
+    u = 0.0
+    if dd > _EPS:
+        u = min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / dd))
+    ex, ey = px - ax - u * dx, py - ay - u * dy
+    return ex * ex + ey * ey
+
+
+def plan_distance(s: Segment, t: Segment) -> float:
+    """Distance of the plan-view projections of two segments (0 where they cross)."""
+    ax, ay, bx, by = s[0], s[1], s[2], s[3]
+    cx, cy, dx, dy = t[0], t[1], t[2], t[3]
+    ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
+    den = ux * vy - uy * vx
+    if abs(den) > _EPS:
+        ex, ey = cx - ax, cy - ay
+        p = (ex * vy - ey * vx) / den
+        q = (ex * uy - ey * ux) / den
+        if 0.0 <= p <= 1.0 and 0.0 <= q <= 1.0:
+            return 0.0
+    return math.sqrt(min(_point_segment_sq(ax, ay, cx, cy, dx, dy),
+                         _point_segment_sq(bx, by, cx, cy, dx, dy),
+                         _point_segment_sq(cx, cy, ax, ay, bx, by),
+                         _point_segment_sq(dx, dy, ax, ay, bx, by)))
+
+
+def segments_clear(s: Segment, t: Segment, h_m: float, v_m: float) -> bool:
+    """Whether two segments keep ``v_m`` apart in altitude or ``h_m`` apart in plan view."""
+    if s[4] - t[5] >= v_m or t[4] - s[5] >= v_m:
+        return True
+    return plan_distance(s, t) >= h_m
+
+
+def volumes_clear(a: Volume, b: Volume, h_m: float, v_m: float) -> bool:
+    """Whether every segment of ``a`` is clear of every segment of ``b``."""
+    return all(segments_clear(s, t, h_m, v_m) for s in a for t in b)
+
+
+def _box(vol: Volume) -> tuple[float, float, float, float, float, float]:
+    """Bounding box ``(x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)`` of a volume."""
+    xs = [c for s in vol for c in (s[0], s[2])]
+    ys = [c for s in vol for c in (s[1], s[3])]
+    return (min(xs), max(xs), min(ys), max(ys), min(s[4] for s in vol), max(s[5] for s in vol))
+
+
+class Clearance:
+    """Reservations and the separation check of :class:`~marl_vertiport.sim.core.VertiportSim`
+    (a part of it: the state it reads and keeps is the simulator's)."""
+
+    # ---------------------------------------------------------------- fixed for the env
+    def _init_clearance(self) -> None:
+        atc, lay = self.cfg.atc, self.layout
+        self.sep_check = atc.separation_check
+        sep = self.cfg.safety.min_separation_m
+        self.clear_h_m = sep + atc.horizontal_buffer_m
+        self.clear_v_m = sep + atc.vertical_buffer_m
+        self.margin_m = atc.along_track_margin_m
+        self.arrival_alt_m = self.cfg.flight.arrival_altitude_m
+        # Holding slots: evenly spaced just inside the boundary, at the arrival altitude,
+        # starting on the bearing of the first destination.
+        radius = lay.airspace_radius_m * (1.0 - 1e-3)
+        fit = max(1, int(2.0 * math.pi * radius // (2.0 * self.clear_h_m)))
+        count = atc.holding_slots or max(self.n, len(lay.destination_xy_m))
+        count = min(count, fit)
+        d0 = lay.destination_xy_m[0]
+        phase = math.atan2(d0[1], d0[0])
+        angles = phase + 2.0 * math.pi * np.arange(count) / count
+        self.slot_pos = np.column_stack([radius * np.cos(angles), radius * np.sin(angles),
+                                         np.full(count, self.arrival_alt_m)])
+        self.slot_pos.setflags(write=False)
+        self._hover_nodes = np.flatnonzero(lay.node_type == HOVER_SPOT)
+        # Memos of pure functions of the fixed layout and a reservation (never episode state).
+        self._volume_ids: dict[Volume, int] = {}
+        self._volumes: list[Volume] = []
+        self._boxes: list[tuple] = []
+        self._node_ok: dict[tuple[int, int], np.ndarray] = {}
+        self._trip_ok: dict[tuple[int, int, int], bool] = {}
+        self._taxi_volumes: dict[int, list[Volume]] = {}
+        self._trip_volumes: dict[tuple[int, int], Volume] = {}
+
+    def _trim_memos(self) -> None:
+        """Empty the memos when they have grown large (at the start of a day only: the ids of
+        the day's reservations, in its snapshots too, name entries of the table)."""
+        if len(self._volumes) >= _MEMO_MAX:
+            self._volume_ids.clear()
+            self._volumes.clear()
+            self._boxes.clear()
+            self._node_ok.clear()
+            self._trip_ok.clear()
+
+    def _intern(self, vol: Volume) -> int:
+        """A small int naming ``vol`` (the key of the memos)."""
+        vid = self._volume_ids.get(vol)
+        if vid is None:
+            vid = len(self._volumes)
+            self._volume_ids[vol] = vid
+            self._volumes.append(vol)
+            self._boxes.append(_box(vol))
+        return vid
+
+    # ---------------------------------------------------------------- reservations
+    def _reserve(self, v: int) -> None:
+        """Set vehicle ``v``'s reservation from its state (rules v1 only)."""
+        if not self.sep_check:
+            return
+        s = self.status.item(v)
+        if s == OUT_OF_SERVICE and math.hypot(self.pos[v, 0], self.pos[v, 1]) \
+                >= self.layout.airspace_radius_m:
+            self.reservation[v] = -1  # down outside the airspace
+            self.reserved[v] = None
+            return
+        if s == AWAY:
+            slot = self.slot_of.item(v)
+            if slot < 0:
+                self.reservation[v] = -1
+                self.reserved[v] = None
+                return
+            vol = volume(self.slot_pos[slot], (), 0.0, self.park_z_m)
+        elif self.has_target[v] and s in (TAXIING, DEPARTING, ARRIVING):
+            vol = volume(self.seg_from[v], [self.target[v]] + self.routes[v], self.margin_m,
+                         self.park_z_m)
+        else:
+            vol = volume(self.pos[v], (), 0.0, self.park_z_m)
+        self.reservation[v] = self._intern(vol)
+        self.reserved[v] = vol
+
+    def _advance_reservation(self, v: int, p: list[float], t: list[float]) -> None:
+        """Release the part of vehicle ``v``'s current segment it has flown: its start moves up
+        to the last whole two steps of flight (``2 x step_len_m``, so that the volumes of a day
+        repeat and their tests are memoised) the vehicle has passed, never back. ``p``: its position,
+        ``t``: its target."""
+        if self.status.item(v) not in _FLYING:
+            return
+        s = self.seg_from[v].tolist()
+        ux, uy, uz = t[0] - s[0], t[1] - s[1], t[2] - s[2]
+        seg_m = math.sqrt(ux * ux + uy * uy + uz * uz)
+        if seg_m <= _EPS:
+            return
+        along = ((p[0] - s[0]) * ux + (p[1] - s[1]) * uy + (p[2] - s[2]) * uz) / seg_m
+        quantum = 2.0 * self.step_len_m
+        steps = math.floor(along / quantum + 1e-9)
+        if steps < 1:
+            return
+        f = steps * quantum / seg_m
+        start = (round(s[0] + f * ux, 9), round(s[1] + f * uy, 9), round(s[2] + f * uz, 9))
+        self.seg_from[v] = start
+        # Only the first segment of the volume changes (the rest is the leg ahead).
+        vol = volume(start, (t,), self.margin_m, self.park_z_m) + self.reserved[v][1:]
+        self.reservation[v] = self._intern(vol)
+        self.reserved[v] = vol
+
+    def _reintern(self) -> None:
+        """Name the reservations of a restored state in this sim's memo table."""
+        for v, vol in enumerate(self.reserved):
+            self.reservation[v] = -1 if vol is None else self._intern(vol)
+
+    def _blockers(self, vol: Volume, v: int) -> list[int]:
+        """The vehicles other than ``v`` whose reservation ``vol`` does not clear."""
+        h, vv = self.clear_h_m, self.clear_v_m
+        bx = _box(vol)
+        out = []
+        for u, rid in enumerate(self.reservation.tolist()):
+            if u == v or rid < 0:
+                continue
+            ob = self._boxes[rid]
+            if (bx[0] - ob[1] >= h or ob[0] - bx[1] >= h or bx[2] - ob[3] >= h
+                    or ob[2] - bx[3] >= h or bx[4] - ob[5] >= vv or ob[4] - bx[5] >= vv):
+                continue
+            if not volumes_clear(vol, self._volumes[rid], h, vv):
+                out.append(u)
+        return out
+
+    def _clear_of_others(self, vol: Volume, v: int) -> bool:
+        return not self._blockers(vol, v)
+
+    # ---------------------------------------------------------------- candidate volumes
+    def _taxi_volume_list(self, node: int) -> list[Volume]:
+        """Volumes of the moves from ``node`` to every node (index: the target)."""
+        vols = self._taxi_volumes.get(node)
+        if vols is None:
+            start = self._node_pos[node]
+            hover = self.cfg.flight.hover_altitude_m
+            vols = [volume(start, local_route(start, self._node_pos[k], hover), self.margin_m,
+                           self.park_z_m) if k != node else () for k in range(self.layout.n_nodes)]
+            self._taxi_volumes[node] = vols
+        return vols
+
+    def _trip_volume(self, node: int, dest: int) -> Volume:
+        """Volume of a take-off from port ``node`` for destination ``dest``."""
+        key = (node, dest)
+        vol = self._trip_volumes.get(key)
+        if vol is None:
+            vol = volume(self._node_pos[node], self._departure_route(node, dest), self.margin_m,
+                         self.park_z_m)
+            self._trip_volumes[key] = vol
+        return vol
+
+    def _departure_route(self, node: int, dest: int) -> list[np.ndarray]:
+        alt = self.cfg.flight.transit_altitude_m
+        x, y = self.layout.node_xy_m[node]
+        exit_xy = self.layout.boundary_point(self.layout.node_xy_m[node],
+                                             self.layout.destination_xy_m[dest])
+        return [np.array([x, y, alt]), np.array([exit_xy[0], exit_xy[1], alt])]
+
+    def _arrival_route(self, start: np.ndarray, node: int) -> list[np.ndarray]:
+        nx, ny = self.layout.node_xy_m[node]
+        return [np.array([nx, ny, self.arrival_alt_m]), self._node_pos[node].copy()]
+
+    def _node_clearances(self, node: int, rid: int) -> np.ndarray:
+        """int8 ``(P,)``: 1 where the move from ``node`` to that node clears reservation ``rid``."""
+        key = (node, rid)
+        ok = self._node_ok.get(key)
+        if ok is None:
+            other, ob = self._volumes[rid], self._boxes[rid]
+            h, vv = self.clear_h_m, self.clear_v_m
+            ok = np.zeros(self.layout.n_nodes, dtype=np.int8)
+            for k, vol in enumerate(self._taxi_volume_list(node)):
+                if not vol:
+                    continue
+                bx = _box(vol)
+                far = (bx[0] - ob[1] >= h or ob[0] - bx[1] >= h or bx[2] - ob[3] >= h
+                       or ob[2] - bx[3] >= h or bx[4] - ob[5] >= vv or ob[4] - bx[5] >= vv)
+                ok[k] = far or volumes_clear(vol, other, h, vv)
+            ok.setflags(write=False)
+            self._node_ok[key] = ok
+        return ok
+
+    def _trip_clearance(self, node: int, dest: int, rid: int) -> bool:
+        key = (node, dest, rid)
+        ok = self._trip_ok.get(key)
+        if ok is None:
+            ok = volumes_clear(self._trip_volume(node, dest), self._volumes[rid],
+                               self.clear_h_m, self.clear_v_m)
+            self._trip_ok[key] = ok
+        return ok
+
+    # ---------------------------------------------------------------- the check
+    def _apply_separation_check(self, v: int, mask: np.ndarray, on_ground: bool) -> None:
+        """Clear, in ``mask`` (of vehicle ``v`` at rest on a node), the take-off and the node
+        moves whose volume does not clear another vehicle's reservation."""
+        node = self.node.item(v)
+        p = self.layout.n_nodes
+        nodes = mask[_NODES:_NODES + p]
+        check_trip = on_ground and mask[self.actions.takeoff]
+        dest = self.dest.item(v)
+        for u, rid in enumerate(self.reservation.tolist()):
+            if u == v or rid < 0:
+                continue
+            nodes &= self._node_clearances(node, rid)
+            if check_trip and not self._trip_clearance(node, dest, rid):
+                mask[self.actions.takeoff] = 0
+                check_trip = False
+
+    def _avoid_plan(self, v: int) -> tuple[int, list[np.ndarray]] | None:
+        """Rules v1: the avoidance layer and route of vehicle ``v`` in flight whose volume clears
+        every other reservation (lowest layer first), ``(-1, [])`` for a hold in place (no
+        horizontal travel left, or already on an avoidance layer: the vehicle stays inside its
+        volume), or ``None`` when no layer clears."""
+        if not self.has_target[v]:
+            return None
+        if self.avoid_layer[v] >= 0:
+            return None
+        waypoints = [self.target[v]] + self.routes[v]
+        horizontal = [w for w in waypoints if math.hypot(w[0] - self.pos[v, 0],
+                                                         w[1] - self.pos[v, 1]) > 1e-9]
+        if not horizontal:
+            return (-1, [])
+        used = set(self.avoid_layer[self.avoid_layer >= 0].tolist())
+        for k, alt in enumerate(self.cfg.flight.avoid_altitudes_m):
+            if k in used:
+                continue
+            route = self._avoid_route(v, alt, waypoints, horizontal)
+            vol = volume(self.pos[v], route, self.margin_m, self.park_z_m)
+            if self._clear_of_others(vol, v):
+                return (k, route)
+        return None
+
+    def _avoid_route(self, v: int, alt: float, waypoints: list, horizontal: list
+                     ) -> list[np.ndarray]:
+        final = waypoints[-1]
+        new_route = [np.array([self.pos[v, 0], self.pos[v, 1], alt])]
+        for w in horizontal:
+            new_route.append(np.array([w[0], w[1], alt]))
+        if abs(final[2] - alt) > 1e-9 and self.status[v] != DEPARTING:
+            new_route.append(final.copy())
+        route = [new_route[0]]
+        for w in new_route[1:]:
+            if np.any(np.abs(w - route[-1]) > 1e-9):
+                route.append(w)
+        return route
+
+    # ---------------------------------------------------------------- arrivals
+    def _free_slot(self, v: int) -> int:
+        """Rules v1: the free holding slot nearest to the bearing of vehicle ``v`` (away, at its
+        destination) whose point clears every reservation, or -1."""
+        taken = set(self.slot_of[self.slot_of >= 0].tolist())
+        d = np.hypot(self.slot_pos[:, 0] - self.pos[v, 0], self.slot_pos[:, 1] - self.pos[v, 1])
+        for k in np.argsort(d, kind="stable").tolist():
+            if k in taken:
+                continue
+            if self._clear_of_others(volume(self.slot_pos[k], (), 0.0, self.park_z_m), v):
+                return k
+        return -1
+
+    def _clear_hover_spots(self, v: int, free: np.ndarray) -> np.ndarray:
+        """Of the free hover spots ``free``, those whose arrival route from vehicle ``v``'s
+        position clears every other reservation."""
+        keep = [k for k in free.tolist()
+                if self._clear_of_others(volume(self.pos[v], self._arrival_route(self.pos[v], k),
+                                                self.margin_m, self.park_z_m), v)]
+        return np.asarray(keep, dtype=np.int64)
+
+    def _landing_point_clear(self, v: int, xy: np.ndarray) -> bool:
+        """Rules v1: whether vehicle ``v`` may come down at ``xy`` in an emergency landing: its
+        fall from where it is to the ground clears every other reservation."""
+        fall = ((float(xy[0]), float(xy[1]), float(xy[0]), float(xy[1]), self.park_z_m,
+                 max(float(self.pos[v, 2]), self.park_z_m)),)
+        return self._clear_of_others(fall, v)
+
+    # ---------------------------------------------------------------- explanations
+    def mask_reasons(self, v: int) -> dict[int, str]:
+        """Why each masked action of vehicle ``v`` is masked now: action index -> one of
+        ``"status"`` (not an action of its status), ``"occupancy"`` (the node is held by another
+        vehicle, or is where it stands), ``"energy"`` (the energy check), ``"separation"`` (the
+        separation check; the vehicles in the way follow: ``"separation: evtol_2, evtol_3"``)."""
+        mask = self.action_mask(v)
+        acts, p = self.actions, self.layout.n_nodes
+        reasons: dict[int, str] = {}
+        s = self.status.item(v)
+        node = self.node.item(v)
+        at_rest_kind = self._fixed_masks[s] is None and s not in (TAXIING, DEPARTING, ARRIVING)
+        for a in np.flatnonzero(mask == 0).tolist():
+            if not at_rest_kind:
+                reasons[a] = "status"
+                if a == acts.avoid and self.sep_check and s in (TAXIING, DEPARTING, ARRIVING):
+                    reasons[a] = self._avoid_reason(v)
+                continue
+            if a in (acts.continue_, acts.avoid):
+                reasons[a] = "status"
+            elif a == acts.takeoff:
+                reasons[a] = "status" if not self._is_port[node] else self._why(
+                    v, a, self._trip_volume(node, self.dest.item(v)) if self.sep_check else None)
+            elif _NODES <= a < _NODES + p:
+                k = a - _NODES
+                if s != HOVERING and not self._is_port[k]:  # a vehicle on a pad goes to pads only
+                    reasons[a] = "status"
+                elif self.node_occupant[k] != -1 or k == node:
+                    reasons[a] = "occupancy"
+                else:
+                    reasons[a] = self._why(
+                        v, a, self._taxi_volume_list(node)[k] if self.sep_check else None)
+            else:  # stay, masked by the energy check (a hovering vehicle that must land)
+                reasons[a] = "energy"
+        return reasons
+
+    def _why(self, v: int, action: int, vol: Volume | None) -> str:
+        atc = self.cfg.atc
+        if atc.energy_check and self.flight_energy_pct(v, action) >= \
+                self.battery.item(v) - atc.energy_reserve_pct:
+            return "energy"
+        if vol is not None:
+            blockers = self._blockers(vol, v)
+            if blockers:
+                return "separation: " + ", ".join(f"evtol_{u}" for u in blockers)
+        return "energy"  # the hover-hold rule of the energy check
+
+    def _avoid_reason(self, v: int) -> str:
+        if not self.has_target[v]:
+            return f"status ({STATUS_NAMES[self.status.item(v)]}, holding)"
+        if self.avoid_layer[v] >= 0:
+            return "status (already on an avoidance layer)"
+        return "separation (no avoidance layer clears)"
