@@ -93,17 +93,7 @@ class Lifecycle:
         k = free[0]
         alt = layers[k]
         self.avoid_layer[v] = k
-        final = waypoints[-1]
-        new_route = [np.array([self.pos[v, 0], self.pos[v, 1], alt])]
-        for w in horizontal:
-            new_route.append(np.array([w[0], w[1], alt]))
-        if abs(final[2] - alt) > 1e-9 and self.status[v] != DEPARTING:
-            new_route.append(final.copy())
-        # Drop duplicates created by the rewrite (consecutive equal waypoints).
-        route = [new_route[0]]
-        for w in new_route[1:]:
-            if np.any(np.abs(w - route[-1]) > 1e-9):
-                route.append(w)
+        route = self._avoid_route(v, alt, waypoints, horizontal)
         self._set_route(v, route, alt)
 
     def _finish_leg(self, v: int) -> int:
