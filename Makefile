@@ -21,12 +21,16 @@ SWEEP    ?= wind
 CURVES   ?= scratch
 SEEDS    ?= 3
 ITERATIONS ?=
+# The layouts `make safety` plays (paper_uncertain and paper_uncertain_10 are paper with
+# uncertainty, which it sets itself).
+SAFETY_LAYOUTS ?= paper small twin wide mid large fleet40
+
 # Where `evaluate`, `sweep` and `train` run their tasks: BACKEND=ray (Ray reads RAY_ADDRESS,
 # e.g. RAY_ADDRESS=auto to join a cluster started with `ray start --head`; docs/scaling.md).
 BACKEND  ?= local
 RUN_ON    = --backend $(BACKEND)
 
-.PHONY: help venv test test-fast check-results fuzz soak train check-train check-train-margin curves evaluate sweep results render bench bench-compare env-demo clean
+.PHONY: help venv test test-fast check-results fuzz soak train check-train check-train-margin curves evaluate sweep results safety render bench bench-compare env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-18s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -87,11 +91,16 @@ endif
 sweep: $(STAMP)  ## run the sweep SWEEP of configs/sweeps/ (default wind) into runs/sweeps/SWEEP: tidy CSV, figure with CIs (BACKEND=ray to use a cluster)
 	$(CLI) sweep $(SWEEP) --out runs/sweeps/$(notdir $(basename $(SWEEP))) $(RUN_ON)
 
-results: $(STAMP)  ## regenerate every shipped result of the shipped policy: docs/results.md (50 days per uncertainty level), docs/results/transfer.md and docs/results/scaling.md (the suites), docs/results/sweeps/wind (the wind sweep)
-	$(CLI) evaluate --agents random fcfs heuristic gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md $(RUN_ON)
+results: $(STAMP)  ## regenerate every shipped result of the shipped policy: docs/results.md (50 days per uncertainty level, the planner included), docs/results/transfer.md and docs/results/scaling.md (the suites), docs/results/sweeps/wind (the wind sweep)
+	$(CLI) evaluate --agents random fcfs heuristic rollout gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md $(RUN_ON)
 	$(CLI) evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md $(RUN_ON)
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
+
+safety: $(STAMP)  ## every controller but the planner on every shipped layout at 0, 5 and 10 % uncertainty (gusts, charger and take-off failures), 50 test days a cell: losses of separation, contacts, minimum separation (docs/results/safety/)
+	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --out docs/results/safety/u00 --report docs/results/safety/u00.md $(RUN_ON)
+	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --set uncertainty.wind_gust_prob=0.05 --set uncertainty.charger_failure_prob=0.05 --set uncertainty.takeoff_failure_prob=0.05 --out docs/results/safety/u05 --report docs/results/safety/u05.md $(RUN_ON)
+	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --set uncertainty.wind_gust_prob=0.1 --set uncertainty.charger_failure_prob=0.1 --set uncertainty.takeoff_failure_prob=0.1 --out docs/results/safety/u10 --report docs/results/safety/u10.md $(RUN_ON)
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
 	$(CLI) render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif

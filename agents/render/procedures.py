@@ -32,6 +32,8 @@ def _draw_segment(ax_plan, ax_side, seg, half_width_m: float, colour: str, label
     length = math.hypot(dx, dy)
     if length < 1e-9:
         ax_plan.add_patch(_circle(ax_, ay, half_width_m, colour))
+        ax_plan.plot([ax_], [ay], "o", color=colour, ms=4, label=label)
+        label = None
     else:
         nx, ny = -dy / length * half_width_m, dx / length * half_width_m
         ax_plan.fill([ax_ + nx, bx + nx, bx - nx, ax_ - nx], [ay + ny, by + ny, by - ny, ay - ny],
@@ -75,7 +77,7 @@ def figure(config: str, out: Path) -> Path:
     arrival = volume(sim.slot_pos[slot], sim._arrival_route(sim.slot_pos[slot], spot), m_m,
                      sim.park_z_m)
     taxi = sim._taxi_volume_list(lay.n_ports + 3)[2]
-    for vol, colour, label in ((departure, "tab:red", f"departure ({fl.transit_altitude_m:g} m)"),
+    for vol, colour, label in ((departure, "tab:red", f"departure ({fl.departure_altitude_m:g} m)"),
                                (arrival, "tab:blue", f"arrival ({fl.arrival_altitude_m:g} m)"),
                                (taxi, "tab:orange", f"move / landing ({fl.hover_altitude_m:g} m)")):
         for k, seg in enumerate(vol):
@@ -89,7 +91,7 @@ def figure(config: str, out: Path) -> Path:
     plan.set_xlabel("x (m)")
     plan.set_ylabel("y (m)")
     layers: dict[float, list[str]] = {}
-    for alt, name in ((fl.hover_altitude_m, "moves"), (fl.transit_altitude_m, "departures"),
+    for alt, name in ((fl.hover_altitude_m, "moves"), (fl.departure_altitude_m, "departures"),
                       (fl.arrival_altitude_m, "arrivals, slots"),
                       *((a, "avoidance") for a in fl.avoid_altitudes_m)):
         layers.setdefault(alt, []).append(name)

@@ -75,10 +75,14 @@ class FlightConfig:
     hover_altitude_m: float = 4.0
     """Altitude of hover spots and of moves between ports and hover spots."""
     transit_altitude_m: float = 8.0
-    """Altitude of departures to the airspace boundary (and, under rules v0, of arrivals)."""
-    arrival_altitude_m: float = 12.0
-    """Rules v1: altitude of arrivals, from the holding slot to above the hover spot, a layer
-    apart from departures so that the two flows never meet (rules v0: the transit altitude)."""
+    """Rules v0: altitude of departures to and arrivals from the airspace boundary."""
+    departure_altitude_m: float = 14.0
+    """Rules v1: altitude of departures, from the pad's climb to the airspace boundary: above
+    every other flow (a climb or descent at a node reaches 6 m with its margin, arrivals fly at
+    8 m), so a departure's level leg clears all of them (rules v0: the transit altitude)."""
+    arrival_altitude_m: float = 8.0
+    """Rules v1: altitude of arrivals, from the holding slot to above the hover spot (rules v0:
+    the transit altitude)."""
     avoid_altitudes_m: tuple[float, ...] = (12.0, 16.0)
     """Altitude layers used by the "avoid collision" action, lowest free layer first."""
     vehicle_size_m: float = 1.0
@@ -378,9 +382,10 @@ def _validate(cfg: EnvConfig) -> None:
     for name in ("horizontal_buffer_m", "vertical_buffer_m", "along_track_margin_m"):
         _check(getattr(atc, name) >= 0, f"atc.{name}", f"must be >= 0, got {getattr(atc, name)}")
     _check(atc.holding_slots >= 0, "atc.holding_slots", f"must be >= 0, got {atc.holding_slots}")
-    _check(fl.arrival_altitude_m > fl.vehicle_height_m, "flight.arrival_altitude_m",
-           f"must be above the vehicle's height ({fl.vehicle_height_m:g} m), got "
-           f"{fl.arrival_altitude_m:g}")
+    for name in ("departure_altitude_m", "arrival_altitude_m"):
+        _check(getattr(fl, name) > fl.vehicle_height_m, f"flight.{name}",
+               f"must be above the vehicle's height ({fl.vehicle_height_m:g} m), got "
+               f"{getattr(fl, name):g}")
 
 
 def from_dict(data: dict[str, Any]) -> EnvConfig:

@@ -3,10 +3,11 @@ version, and the old one keeps its behaviour bit for bit.
 
 - **v1** (``vertiport_v1``, ``marl_vertiport/Vertiport-v1``; the schema's defaults): the ATC's
   separation check and the airspace procedures of :mod:`marl_vertiport.sim.clearance`
-  (``atc.separation_check``, arrivals at ``flight.arrival_altitude_m``, holding slots).
+  (``atc.separation_check``, departures at ``flight.departure_altitude_m``, arrivals at
+  ``flight.arrival_altitude_m``, holding slots).
 - **v0** (``vertiport_v0``, ``marl_vertiport/Vertiport-v0``): the rules before them: no
-  separation check, arrivals at the transit altitude. :func:`with_rules` sets those two keys
-  whatever the config says; every other key is the config's.
+  separation check, departures and arrivals at the transit altitude. :func:`with_rules` sets
+  those three keys whatever the config says; every other key is the config's.
 """
 
 from __future__ import annotations
@@ -20,14 +21,16 @@ LATEST_RULES = RULES_VERSIONS[-1]
 
 
 def with_rules(cfg: EnvConfig, rules: int) -> EnvConfig:
-    """``cfg`` under the rules of version ``rules`` (v1: as it is; v0: no separation check and
-    arrivals at the transit altitude)."""
+    """``cfg`` under the rules of version ``rules`` (v1: as it is; v0: no separation check,
+    departures and arrivals at the transit altitude)."""
     if rules == 1:
         return cfg
     if rules == 0:
-        if not cfg.atc.separation_check and \
-                cfg.flight.arrival_altitude_m == cfg.flight.transit_altitude_m:
+        transit = cfg.flight.transit_altitude_m
+        if not cfg.atc.separation_check and cfg.flight.arrival_altitude_m == transit \
+                and cfg.flight.departure_altitude_m == transit:
             return cfg
         return cfg.replace(**{"atc.separation_check": False,
-                              "flight.arrival_altitude_m": cfg.flight.transit_altitude_m})
+                              "flight.departure_altitude_m": transit,
+                              "flight.arrival_altitude_m": transit})
     raise ConfigError(f"rules: version {rules!r} does not exist; known: {list(RULES_VERSIONS)}")

@@ -278,7 +278,7 @@ class Clearance:
         return vol
 
     def _departure_route(self, node: int, dest: int) -> list[np.ndarray]:
-        alt = self.cfg.flight.transit_altitude_m
+        alt = self.cfg.flight.departure_altitude_m
         x, y = self.layout.node_xy_m[node]
         exit_xy = self.layout.boundary_point(self.layout.node_xy_m[node],
                                              self.layout.destination_xy_m[dest])
@@ -349,7 +349,7 @@ class Clearance:
             return (-1, [])
         used = set(self.avoid_layer[self.avoid_layer >= 0].tolist())
         for k, alt in enumerate(self.cfg.flight.avoid_altitudes_m):
-            if k in used:
+            if k in used or alt <= self.leg_alt.item(v):  # a climb, never a descent
                 continue
             route = self._avoid_route(v, alt, waypoints, horizontal)
             vol = volume(self.pos[v], route, self.margin_m, self.park_z_m)

@@ -70,8 +70,9 @@ class FlightEnergy:
         hop_pct: ``(P, P)``: from node ``i`` (a port or a hover spot) to node ``k`` (a taxi, a
             landing or a move between hover spots); 0 on the diagonal.
         trip_pct: ``(ports, D)``: a take-off from port ``i`` for destination ``d``: the climb to
-            the transit altitude, out to the airspace boundary, to the destination, back to the
-            boundary on its radial, to the hover spot nearest to the re-entry point, and the
+            the departure altitude, out to the airspace boundary, to the destination, back to the
+            boundary on its radial at the arrival altitude (without the way around to a holding
+            slot, which the reserve covers), to the hover spot nearest to the re-entry point, and the
             landing on the charging port nearest to that spot (straight from the boundary to the
             nearest charging port in a layout without hover spots).
     """
@@ -90,20 +91,20 @@ class FlightEnergy:
                                  for i in range(p)]).reshape(p, p)
         chargers = np.flatnonzero(layout.node_type == CHARGING_PORT).tolist()
         spots = np.flatnonzero(layout.node_type == HOVER_SPOT)
-        alt = fl.transit_altitude_m
+        alt, back = fl.departure_altitude_m, fl.arrival_altitude_m
         trip = np.zeros((layout.n_ports, len(layout.destination_xy_m)))
         for i in range(layout.n_ports):
             start = node_pos[i]
             for d, dest_xy in enumerate(layout.destination_xy_m):
                 exit_xy = layout.boundary_point(start[:2], dest_xy)
                 entry_xy = layout.boundary_point(np.zeros(2), dest_xy) * (1.0 - 1e-3)
-                route = [(start[0], start[1], alt), (*exit_xy, alt), (*dest_xy, alt), (*entry_xy, alt)]
+                route = [(start[0], start[1], alt), (*exit_xy, alt), (*dest_xy, alt), (*entry_xy, back)]
                 if spots.size:
                     h = int(spots[np.argmin(np.linalg.norm(layout.node_xy_m[spots] - entry_xy, axis=1))])
-                    route += [(*layout.node_xy_m[h], alt), node_pos[h]]
+                    route += [(*layout.node_xy_m[h], back), node_pos[h]]
                     land = min(self.hop_pct[h, c] for c in chargers)
                 else:
-                    here = np.array([*entry_xy, alt])
+                    here = np.array([*entry_xy, back])
                     land = min(cost(here, c) for c in chargers)
                 trip[i, d] = route_energy_pct(start, route, step, bat) + land
         self.trip_pct = trip

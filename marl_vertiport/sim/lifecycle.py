@@ -52,7 +52,7 @@ class Lifecycle:
         self.delay[v] = 0.0
 
     def _start_departure(self, v: int) -> None:
-        alt = self.cfg.flight.transit_altitude_m
+        alt = self.cfg.flight.departure_altitude_m
         x, y, _ = self.pos[v]
         dest_xy = self.layout.destination_xy_m[self.dest[v]]
         exit_xy = self.layout.boundary_point(self.pos[v, :2], dest_xy)

@@ -84,13 +84,15 @@ def test_take_off_under_an_inbound_vehicle_is_masked_until_it_is_down():
     park(sim, 1, 3)  # evtol_1 hovering at spot 0 (-14, 0)
     sim.status[1] = ARRIVING  # inbound: cleared down to the spot beside port 0
     sim._release(1)
-    sim.pos[1] = [-6.0, 3.0, 12.0]
+    sim.pos[1] = [-6.0, 3.0, 8.0]
+    sim.physics.make_static(1, sim.pos[1])  # the engine's body there too
+    sim.physics.make_dynamic(1)
     sim._occupy(1, 5)
-    sim._set_route(1, [sim._node_pos[5].copy()], 12.0)
+    sim._set_route(1, [sim._node_pos[5].copy()], 8.0)
     sim._mask_cache = {}
     assert sim.action_mask(0)[TAKEOFF] == 0
     assert sim.mask_reasons(0)[TAKEOFF] == "separation: evtol_1"
-    for _ in range(8):  # evtol_0 stays while evtol_1 descends 8 m at 2 m a step
+    for _ in range(4):  # evtol_0 stays while evtol_1 descends 4 m at 2 m a step
         sim.acting = 0
         sim.step(STAY)
     assert sim.status[1] == HOVERING
@@ -149,7 +151,7 @@ def test_two_vehicles_back_from_one_destination_hold_in_slots_of_their_own():
     assert sim.slot_of[0] >= 0 and sim.slot_of[1] >= 0 and sim.slot_of[0] != sim.slot_of[1]
     gap = np.linalg.norm(sim.slot_pos[sim.slot_of[0]] - sim.slot_pos[sim.slot_of[1]])
     assert gap >= 2 * sim.clear_h_m
-    assert sim.target[0][2] == sim.target[1][2] == sim.arrival_alt_m == 12.0
+    assert sim.target[0][2] == sim.target[1][2] == sim.arrival_alt_m == 8.0
 
 
 def test_a_reentry_whose_inbound_path_is_reserved_holds_in_its_slot():
@@ -163,11 +165,11 @@ def test_a_reentry_whose_inbound_path_is_reserved_holds_in_its_slot():
     sim._reserve(0)
     sim.status[2] = TAXIING  # evtol_2 on the inbound path, at the arrival altitude
     sim.pos[2] = sim.slot_pos[slot] * [0.85, 0.85, 1.0]
-    sim._set_route(2, [sim.slot_pos[slot] * [0.8, 0.8, 1.0]], 12.0)
+    sim._set_route(2, [sim.slot_pos[slot] * [0.8, 0.8, 1.0]], 8.0)
     sim._assign_hover_spot(0)
     assert 0 in sim._holding and sim.slot_of[0] == slot and sim.node[0] == -1
     assert sim.reserved[0] == ((*sim.slot_pos[slot, :2], *sim.slot_pos[slot, :2],
-                                12.0, 12.0),)
+                                8.0, 8.0),)
     park(sim, 2, 6)  # evtol_2 gone down to (0, -12): a way in clears
     sim.acting = 1
     sim.step(STAY)
@@ -225,7 +227,8 @@ def test_masks_are_never_empty_and_every_masked_action_has_a_reason():
 
 def test_rules_v0_keep_the_old_masks_and_no_reservations():
     sim = make(rules=0)
-    assert not sim.sep_check and sim.cfg.flight.arrival_altitude_m == 8.0
+    fl = sim.cfg.flight
+    assert not sim.sep_check and fl.arrival_altitude_m == fl.departure_altitude_m == 8.0
     park(sim, 0, 0)
     park(sim, 1, 3)
     sim.acting = 0
