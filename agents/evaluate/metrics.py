@@ -10,11 +10,13 @@ from marl_vertiport.sim.metrics import METRICS
 METRIC_LABELS = {name: info.label for name, info in METRICS.items()}
 #: Columns of the printed table (agents as rows).
 TABLE_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                 "mean_delay_min", "collisions", "separation_losses", "stranded_air",
-                 "stranded_ground", "service_min_lost")
+                 "mean_delay_min", "collisions", "separation_losses", "min_separation_m",
+                 "separation_loss_min", "contacts", "stranded_air", "stranded_ground",
+                 "service_min_lost")
 #: Panels of the case-study chart.
 FIGURE_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
-                  "mean_delay_min", "collisions", "stranded_air", "stranded_ground")
+                  "mean_delay_min", "collisions", "separation_losses", "min_separation_m",
+                  "contacts", "stranded_air", "stranded_ground")
 #: Which way is better for a metric (+1 higher, -1 lower), for the report's generated findings.
 DIRECTION = {name: info.better for name, info in METRICS.items() if info.better}
 CASE_LABELS = {"paper": "case 1, no uncertainty", "paper_uncertain": "case 2, with uncertainty",

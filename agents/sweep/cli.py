@@ -143,7 +143,8 @@ def run_sweep(spec: SweepSpec, backend: Backend, progress: bool = True) -> Sweep
 
 def format_summary(result: SweepResult) -> str:
     """A console table: per agent, case and point, the reward and the safety metrics."""
-    columns = [m for m in ("total_reward", "stranded", "collisions", "separation_losses")
+    columns = [m for m in ("total_reward", "stranded", "collisions", "separation_losses",
+                           "min_separation_m", "contacts")
                if m in result.metrics]
     rows = summary_rows(result)
     spec = result.spec

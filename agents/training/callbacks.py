@@ -113,6 +113,8 @@ class RunProgress(Callback):
             msg += (f"  | day: reward {row['total_reward']:7.1f} battery {row['mean_battery_pct']:4.1f}% "
                     f"good TO/LD {row['good_takeoffs']:4.1f}/{row['good_landings']:4.1f} "
                     f"delay {row['mean_delay_min']:6.1f} coll {row['collisions']:4.1f} "
+                    f"sep loss {row.get('separation_losses', nan):3.1f} "
+                    f"contacts {row.get('contacts', nan):3.1f} "
                     f"lost {row['stranded_air']:3.1f} air/{row['stranded_ground']:3.1f} ground")
         self._say(f"{msg}  eta {eta / 60:4.1f} min")
 

@@ -10,7 +10,9 @@ from pathlib import Path
 from agents.controllers.gcn import GRAPH_ACTOR
 from agents.training.imitation import TEACHERS
 from agents.training.vec_env import CRITIC_INPUTS, ROW_LAYOUTS
-from marl_vertiport.config import ConfigError, load_config, load_yaml_dataclass
+from marl_vertiport.config import (
+    LATEST_RULES, RULES_VERSIONS, ConfigError, load_config, load_yaml_dataclass, with_rules,
+)
 
 TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
 
@@ -134,6 +136,9 @@ class TrainConfig:
     scenarios: tuple[str, ...] = ()
     """Env configs to train across (multi-agent mode): PPO's copies and the warm start's days
     cycle through them. Empty: ``env_config`` alone."""
+    rules: int = LATEST_RULES
+    """The env's rules version every env of the run plays under (``vertiport_v{rules}``: 1 the
+    separation check, 0 the rules before it)."""
     lost_vehicle_penalty: float = 0.0
     """Subtracted from the reward the learner sees for each vehicle lost in a step (stranded
     in the air or on the ground); the warm start scores its fits the same way. Evaluation
@@ -182,6 +187,7 @@ class TrainConfig:
     def __post_init__(self) -> None:
         checks = [
             (self.mode in ("multi_agent", "single_agent"), "mode", "multi_agent or single_agent"),
+            (self.rules in RULES_VERSIONS, "rules", f"one of {list(RULES_VERSIONS)}"),
             (self.num_envs >= 1, "num_envs", "must be >= 1"),
             (self.num_steps_per_env >= 1, "num_steps_per_env", "must be >= 1"),
             (self.iterations >= 1, "iterations", "must be >= 1"),
@@ -241,4 +247,5 @@ def load_train_config(config: str | Path) -> TrainConfig:
 
 def scenario_configs(cfg: TrainConfig) -> list:
     """The env configs a run trains on (``scenarios``, or ``env_config`` alone), loaded."""
-    return [load_config(name) for name in (cfg.scenarios or (cfg.env_config,))]
+    return [with_rules(load_config(name), cfg.rules)
+            for name in (cfg.scenarios or (cfg.env_config,))]

@@ -32,7 +32,7 @@ from agents.training.ensemble import distil_ensemble
 from agents.training.imitation import load_warm_start_state, padded_sizes, warm_start
 from agents.training.log_writer import CALLBACK_KEY
 from agents.training.runner import load_checkpoint_into, make_runner_class, make_vec_env, runner_config
-from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
+from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict, with_rules
 
 Log = Callable[[str], None]
 
@@ -59,7 +59,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     if cfg.device.startswith("cuda") and not torch.cuda.is_available():
         raise ConfigError(f"device: {cfg.device!r} requested but no CUDA device is available")
     run_dir.mkdir(parents=True, exist_ok=True)
-    env_cfg = load_config(cfg.env_config)
+    env_cfg = with_rules(load_config(cfg.env_config), cfg.rules)
     if not resume:
         write_atomic(run_dir / "train_config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
         write_atomic(run_dir / "env_config.yaml", yaml.safe_dump(to_dict(env_cfg), sort_keys=False))
@@ -170,4 +170,5 @@ def evaluation_stage(final: Path, cfg: TrainConfig, run_dir: Path, log: Log,
     log(f"evaluating {final.name} against {', '.join(cfg.evaluation.agents)} on validation "
         f"seeds {seeds} (test seeds stay for reported numbers)")
     evaluate_main(["--agents", str(final), *cfg.evaluation.agents, "--seeds", seeds,
-                   "--out", str(run_dir / "eval"), *(backend_args or [])])
+                   "--rules", str(cfg.rules), "--out", str(run_dir / "eval"),
+                   *(backend_args or [])])
