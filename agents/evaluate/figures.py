@@ -61,7 +61,10 @@ def case_study_figure(evaluation: Evaluation) -> bytes:
             low = np.array([r["ci_low"] if r else np.nan for r in rows])
             high = np.array([r["ci_high"] if r else np.nan for r in rows])
             ax.bar(x + (j - (len(s.configs) - 1) / 2) * width, mean, width,
-                   yerr=np.vstack([mean - low, high - mean]), capsize=4, color=colors[config],
+                   # A metric that barely varies (a minimum distance) can give an interval a
+                   # rounding error off its mean: bars never get a negative error.
+                   yerr=np.clip(np.vstack([mean - low, high - mean]), 0.0, None), capsize=4,
+                   color=colors[config],
                    error_kw={"elinewidth": 1.2, "ecolor": "#222222"}, label=case_label(config))
         ax.set_title(METRIC_LABELS.get(metric, metric).capitalize(), fontsize=12)
         ax.set_ylabel(axis_label(metric), fontsize=10)
