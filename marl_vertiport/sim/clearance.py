@@ -48,6 +48,8 @@ Volume = tuple[Segment, ...]
 
 _NODES = LEADING_ACTIONS
 _FLYING = (TAXIING, DEPARTING, ARRIVING)
+#: Steps of flight a reservation is released by at a time, behind a vehicle.
+_QUANTUM_STEPS = 2
 _EPS = 1e-9
 #: Entries kept in a memo of pure volume tests before it is emptied (bounds memory on long runs).
 _MEMO_MAX = 20_000
@@ -58,18 +60,20 @@ def volume(start, waypoints, margin_m: float, floor_z_m: float) -> Volume:
     one segment per leg, extended ``margin_m`` behind its start along its direction (a vertical
     leg in altitude, no lower than ``floor_z_m``). A flight without waypoints is the point
     ``start``."""
-    x0, y0, z0 = (float(c) for c in start)
-    if not waypoints:
+    x0, y0, z0 = float(start[0]), float(start[1]), float(start[2])
+    if not len(waypoints):
         return ((x0, y0, x0, y0, z0, z0),)
     segs = []
     for w in waypoints:
-        x1, y1, z1 = (float(c) for c in w)
-        h = math.hypot(x1 - x0, y1 - y0)
+        x1, y1, z1 = float(w[0]), float(w[1]), float(w[2])
+        dx, dy = x1 - x0, y1 - y0
+        h = math.hypot(dx, dy)
         if h > _EPS:  # a level leg (every horizontal leg flown is level)
-            ax, ay = x0 - (x1 - x0) / h * margin_m, y0 - (y1 - y0) / h * margin_m
-            segs.append((ax, ay, x1, y1, min(z0, z1), max(z0, z1)))
+            segs.append((x0 - dx / h * margin_m, y0 - dy / h * margin_m, x1, y1,
+                         z0 if z0 < z1 else z1, z1 if z0 < z1 else z0))
         elif z1 > z0 + _EPS:  # a climb: the margin below its start
-            segs.append((x0, y0, x1, y1, max(z0 - margin_m, floor_z_m), z1))
+            low = z0 - margin_m
+            segs.append((x0, y0, x1, y1, low if low > floor_z_m else floor_z_m, z1))
         elif z1 < z0 - _EPS:  # a descent: the margin above its start
             segs.append((x0, y0, x1, y1, z1, z0 + margin_m))
         else:
@@ -118,6 +122,40 @@ def volumes_clear(a: Volume, b: Volume, h_m: float, v_m: float) -> bool:
     return all(segments_clear(s, t, h_m, v_m) for s in a for t in b)
 
 
+class _Memo:
+    """Memos of pure functions of a vertiport's geometry and of reservations, shared by every
+    simulator of that geometry in a process (an env's copies, a planner's look-ahead sims, the
+    worker of an evaluation): the volumes named by small ints, their boxes, and which
+    clearances clear which reservation. ``gen`` counts the times it was emptied; a simulator
+    that finds it changed names its reservations again (:meth:`Clearance._check_memo`)."""
+
+    def __init__(self) -> None:
+        self.volume_ids: dict[Volume, int] = {}
+        self.volumes: list[Volume] = []
+        self.boxes: list[tuple] = []
+        self.node_ok: dict[tuple[int, int], np.ndarray] = {}
+        self.trip_ok: dict[tuple[int, int, int], bool] = {}
+        self.taxi_volumes: dict[int, list[Volume]] = {}
+        self.trip_volumes: dict[tuple[int, int], Volume] = {}
+        self.lifted: dict[tuple[int, int, bool], int] = {}
+        self.lifted_ok: dict[tuple[int, int], bool] = {}
+        self.releases: dict[tuple, tuple] = {}
+        self.gen = 0
+
+
+#: The memos by geometry, the most recently used last (a few layouts at a time).
+_MEMOS: dict[tuple, _Memo] = {}
+_MEMOS_KEPT = 8
+
+
+def _shared_memo(key: tuple) -> _Memo:
+    memo = _MEMOS.pop(key, None) or _Memo()
+    _MEMOS[key] = memo
+    while len(_MEMOS) > _MEMOS_KEPT:
+        del _MEMOS[next(iter(_MEMOS))]
+    return memo
+
+
 def _box(vol: Volume) -> tuple[float, float, float, float, float, float]:
     """Bounding box ``(x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)`` of a volume."""
     xs = [c for s in vol for c in (s[0], s[2])]
@@ -151,24 +189,36 @@ class Clearance:
                                          np.full(count, self.arrival_alt_m)])
         self.slot_pos.setflags(write=False)
         self._hover_nodes = np.flatnonzero(lay.node_type == HOVER_SPOT)
-        # Memos of pure functions of the fixed layout and a reservation (never episode state).
-        self._volume_ids: dict[Volume, int] = {}
-        self._volumes: list[Volume] = []
-        self._boxes: list[tuple] = []
-        self._node_ok: dict[tuple[int, int], np.ndarray] = {}
-        self._trip_ok: dict[tuple[int, int, int], bool] = {}
-        self._taxi_volumes: dict[int, list[Volume]] = {}
-        self._trip_volumes: dict[tuple[int, int], Volume] = {}
+        # Memos of pure functions of the geometry and of reservations (never episode state),
+        # shared with every simulator of the same geometry in this process.
+        fl = self.cfg.flight
+        key = (lay.node_xy_m.tobytes(), lay.node_type.tobytes(), lay.node_z_m.tobytes(),
+               lay.destination_xy_m.tobytes(), lay.airspace_radius_m, fl.hover_altitude_m,
+               fl.departure_altitude_m, self.arrival_alt_m, self.margin_m, self.clear_h_m,
+               self.clear_v_m, self.park_z_m)
+        memo = self._memo = _shared_memo(key) if self.sep_check else _Memo()
+        self._memo_gen = memo.gen
+        self._volume_ids, self._volumes, self._boxes = memo.volume_ids, memo.volumes, memo.boxes
+        self._node_ok, self._trip_ok = memo.node_ok, memo.trip_ok
+        self._taxi_volumes, self._trip_volumes = memo.taxi_volumes, memo.trip_volumes
+
+    def _check_memo(self) -> None:
+        """Name this simulator's reservations again if another simulator emptied the shared
+        memos since (the ids it holds name entries of the emptied table)."""
+        if self._memo_gen != self._memo.gen:
+            self._memo_gen = self._memo.gen
+            self._reintern()
 
     def _trim_memos(self) -> None:
-        """Empty the memos when they have grown large (at the start of a day only: the ids of
-        the day's reservations, in its snapshots too, name entries of the table)."""
-        if len(self._volumes) >= _MEMO_MAX:
-            self._volume_ids.clear()
-            self._volumes.clear()
-            self._boxes.clear()
-            self._node_ok.clear()
-            self._trip_ok.clear()
+        """Empty the memos when they have grown large (at the start of a day; every simulator
+        sharing them names its reservations again before it next uses them)."""
+        memo = self._memo
+        if len(memo.volumes) >= _MEMO_MAX:
+            for table in (memo.volume_ids, memo.volumes, memo.boxes, memo.node_ok, memo.trip_ok,
+                          memo.lifted, memo.lifted_ok, memo.releases):
+                table.clear()
+            memo.gen += 1
+        self._memo_gen = memo.gen
 
     def _intern(self, vol: Volume) -> int:
         """A small int naming ``vol`` (the key of the memos)."""
@@ -201,35 +251,62 @@ class Clearance:
         elif self.has_target[v] and s in (TAXIING, DEPARTING, ARRIVING):
             vol = volume(self.seg_from[v], [self.target[v]] + self.routes[v], self.margin_m,
                          self.park_z_m)
+            self._note_release(v, self.seg_from[v].tolist(), self.target[v].tolist())
         else:
             vol = volume(self.pos[v], (), 0.0, self.park_z_m)
         self.reservation[v] = self._intern(vol)
         self.reserved[v] = vol
+
+    def _note_release(self, v: int, s: list[float], t: list[float]) -> None:
+        """Keep, for the quick test of :meth:`_advance_reservation`, vehicle ``v``'s segment
+        start ``s``, its unit direction to the target ``t`` and the distance along it below
+        which nothing is released yet."""
+        ux, uy, uz = t[0] - s[0], t[1] - s[1], t[2] - s[2]
+        seg_m = math.sqrt(ux * ux + uy * uy + uz * uz)
+        if seg_m <= _EPS:
+            self.release_at[v] = None
+            return
+        self.release_at[v] = (s[0], s[1], s[2], ux / seg_m, uy / seg_m, uz / seg_m,
+                              _QUANTUM_STEPS * self.step_len_m - 1e-6)
 
     def _advance_reservation(self, v: int, p: list[float], t: list[float]) -> None:
         """Release the part of vehicle ``v``'s current segment it has flown: its start moves up
         to the last whole two steps of flight (``2 x step_len_m``, so that the volumes of a day
         repeat and their tests are memoised) the vehicle has passed, never back. ``p``: its position,
         ``t``: its target."""
-        if self.status.item(v) not in _FLYING:
+        quick = self.release_at[v]
+        if quick is None or self.status.item(v) not in _FLYING:
             return
+        sx, sy, sz, ux, uy, uz, first = quick
+        if (p[0] - sx) * ux + (p[1] - sy) * uy + (p[2] - sz) * uz < first:
+            return  # not yet a whole quantum flown: nothing to release
         s = self.seg_from[v].tolist()
         ux, uy, uz = t[0] - s[0], t[1] - s[1], t[2] - s[2]
         seg_m = math.sqrt(ux * ux + uy * uy + uz * uz)
         if seg_m <= _EPS:
             return
         along = ((p[0] - s[0]) * ux + (p[1] - s[1]) * uy + (p[2] - s[2]) * uz) / seg_m
-        quantum = 2.0 * self.step_len_m
+        quantum = _QUANTUM_STEPS * self.step_len_m
         steps = math.floor(along / quantum + 1e-9)
         if steps < 1:
             return
-        f = steps * quantum / seg_m
-        start = (round(s[0] + f * ux, 9), round(s[1] + f * uy, 9), round(s[2] + f * uz, 9))
+        # The volume after a release depends only on the volume before it, where the segment
+        # began (a climb's volume, cut at the ground, does not say) and the quanta flown.
+        key = (self.reservation.item(v), s[0], s[1], s[2], steps)
+        done = self._memo.releases.get(key)
+        if done is None:
+            f = steps * quantum / seg_m
+            start = (round(s[0] + f * ux, 9), round(s[1] + f * uy, 9), round(s[2] + f * uz, 9))
+            # Only the first segment of the volume changes (the rest is the leg ahead).
+            vol = volume(start, (t,), self.margin_m, self.park_z_m) + self.reserved[v][1:]
+            self._note_release(v, list(start), t)
+            done = (start, self._intern(vol), vol, self.release_at[v])
+            self._memo.releases[key] = done
+        start, vid, vol, quick = done
         self.seg_from[v] = start
-        # Only the first segment of the volume changes (the rest is the leg ahead).
-        vol = volume(start, (t,), self.margin_m, self.park_z_m) + self.reserved[v][1:]
-        self.reservation[v] = self._intern(vol)
+        self.reservation[v] = vid
         self.reserved[v] = vol
+        self.release_at[v] = quick
 
     def _reintern(self) -> None:
         """Name the reservations of a restored state in this sim's memo table."""
@@ -333,29 +410,89 @@ class Clearance:
                 mask[self.actions.takeoff] = 0
                 check_trip = False
 
-    def _avoid_plan(self, v: int) -> tuple[int, list[np.ndarray]] | None:
-        """Rules v1: the avoidance layer and route of vehicle ``v`` in flight whose volume clears
-        every other reservation (lowest layer first), ``(-1, [])`` for a hold in place (no
-        horizontal travel left, or already on an avoidance layer: the vehicle stays inside its
-        volume), or ``None`` when no layer clears."""
-        if not self.has_target[v]:
+    def _avoid_layer(self, v: int) -> int | None:
+        """Rules v1: the avoidance layer vehicle ``v`` in flight may climb to now (the lowest
+        free layer above its leg whose lifted volume clears every other reservation), ``-1``
+        for a hold in place (no horizontal travel left: the vehicle stays inside its volume),
+        ``None`` when none clears, when it already flies on a layer or holds without a route.
+
+        The test uses the vehicle's reservation lifted to the layer (:meth:`_lifted_id`), which
+        holds the avoidance route from anywhere the vehicle may be on its current segment, so
+        the answer is memoised per reservation, not per position."""
+        if not self.has_target[v] or self.avoid_layer[v] >= 0:
             return None
-        if self.avoid_layer[v] >= 0:
-            return None
+        x, y = self.pos[v, 0], self.pos[v, 1]
         waypoints = [self.target[v]] + self.routes[v]
-        horizontal = [w for w in waypoints if math.hypot(w[0] - self.pos[v, 0],
-                                                         w[1] - self.pos[v, 1]) > 1e-9]
-        if not horizontal:
-            return (-1, [])
+        if not any(math.hypot(w[0] - x, w[1] - y) > 1e-9 for w in waypoints):
+            return -1
         used = set(self.avoid_layer[self.avoid_layer >= 0].tolist())
+        others = [rid for u, rid in enumerate(self.reservation.tolist()) if u != v and rid >= 0]
+        memo = self._memo
         for k, alt in enumerate(self.cfg.flight.avoid_altitudes_m):
             if k in used or alt <= self.leg_alt.item(v):  # a climb, never a descent
                 continue
-            route = self._avoid_route(v, alt, waypoints, horizontal)
-            vol = volume(self.pos[v], route, self.margin_m, self.park_z_m)
-            if self._clear_of_others(vol, v):
-                return (k, route)
+            lid = self._lifted_id(v, k, alt)
+            clear = True
+            for rid in others:
+                ok = memo.lifted_ok.get((lid, rid))
+                if ok is None:
+                    ok = self._ids_clear(lid, rid)
+                    memo.lifted_ok[(lid, rid)] = ok
+                if not ok:
+                    clear = False
+                    break
+            if clear:
+                return k
         return None
+
+    def _ids_clear(self, a: int, b: int) -> bool:
+        """Whether interned volumes ``a`` and ``b`` are clear of each other."""
+        h, vv = self.clear_h_m, self.clear_v_m
+        ba, bb = self._boxes[a], self._boxes[b]
+        if (ba[0] - bb[1] >= h or bb[0] - ba[1] >= h or ba[2] - bb[3] >= h
+                or bb[2] - ba[3] >= h or ba[4] - bb[5] >= vv or bb[4] - ba[5] >= vv):
+            return True
+        return volumes_clear(self._volumes[a], self._volumes[b], h, vv)
+
+    def _lifted_id(self, v: int, k: int, alt: float) -> int:
+        """The id of vehicle ``v``'s reservation lifted to avoidance layer ``k`` at ``alt``: its
+        current segment as a curtain from the margin below it up to the layer (the climb may
+        start anywhere on it), its later level legs at the layer, its later climbs and descents
+        as columns reaching the layer with the margin, and, but for a departure, the final
+        descent from the layer. The avoidance route from any point of the current segment lies
+        inside it."""
+        departing = self.status.item(v) == DEPARTING
+        key = (self.reservation.item(v), k, departing)
+        lid = self._memo.lifted.get(key)
+        if lid is None:
+            own = self.reserved[v]
+            m, floor = self.margin_m, self.park_z_m
+            ax, ay, bx, by, zlo, zhi = own[0]
+            segs = [(ax, ay, bx, by, max(zlo - m, floor), max(zhi, alt))]
+            for t in own[1:]:
+                if t[0] != t[2] or t[1] != t[3]:  # a level leg
+                    segs.append((t[0], t[1], t[2], t[3], alt, alt))
+                else:
+                    segs.append((t[0], t[1], t[2], t[3], min(t[4], alt), max(t[5], alt + m)))
+            final = (self.routes[v][-1] if self.routes[v] else self.target[v]).tolist()
+            if not departing and abs(final[2] - alt) > 1e-9:
+                segs.append((final[0], final[1], final[0], final[1], min(final[2], alt),
+                             max(final[2], alt) + m))
+            lid = self._intern(tuple(segs))
+            self._memo.lifted[key] = lid
+        return lid
+
+    def _avoid_plan(self, v: int) -> tuple[int, list[np.ndarray]] | None:
+        """Rules v1: ``(layer, route)`` of the avoidance climb :meth:`_avoid_layer` clears,
+        ``(-1, [])`` for a hold in place, ``None`` when none is cleared."""
+        k = self._avoid_layer(v)
+        if k is None or k < 0:
+            return None if k is None else (-1, [])
+        waypoints = [self.target[v]] + self.routes[v]
+        horizontal = [w for w in waypoints if math.hypot(w[0] - self.pos[v, 0],
+                                                         w[1] - self.pos[v, 1]) > 1e-9]
+        return k, self._avoid_route(v, self.cfg.flight.avoid_altitudes_m[k], waypoints,
+                                    horizontal)
 
     def _avoid_route(self, v: int, alt: float, waypoints: list, horizontal: list
                      ) -> list[np.ndarray]:
@@ -405,6 +542,8 @@ class Clearance:
         ``"status"`` (not an action of its status), ``"occupancy"`` (the node is held by another
         vehicle, or is where it stands), ``"energy"`` (the energy check), ``"separation"`` (the
         separation check; the vehicles in the way follow: ``"separation: evtol_2, evtol_3"``)."""
+        if self.sep_check:
+            self._check_memo()
         mask = self.action_mask(v)
         acts, p = self.actions, self.layout.n_nodes
         reasons: dict[int, str] = {}

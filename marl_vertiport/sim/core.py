@@ -191,6 +191,7 @@ class VertiportSim(Legality, Clearance, Lifecycle, Motion, Separation, Stranding
         # their destination that wait outside for a slot.
         self.reservation = np.full(n, -1, dtype=np.int64)
         self.reserved: list[tuple | None] = [None] * n  # the volumes the ids name
+        self.release_at: list[tuple | None] = [None] * n  # the quick test of a release
         self.seg_from = np.zeros((n, 3))
         self.slot_of = np.full(n, -1, dtype=np.int64)
         self._waiting_outside: set[int] = set()
@@ -295,6 +296,8 @@ class VertiportSim(Legality, Clearance, Lifecycle, Motion, Separation, Stranding
         Returns:
             ``(reward of the acting vehicle, info of the step)``.
         """
+        if self.sep_check:
+            self._check_memo()
         v = self.acting
         a = self.check_action(v, action)
         cfg, rng, acts = self.cfg, self.rng, self.actions

@@ -42,13 +42,15 @@ class Legality:
         cached = self._mask_cache.get(v)
         if cached is not None:
             return cached
+        if self.sep_check:
+            self._check_memo()
         s = self.status.item(v)
         mask = self._fixed_masks[s]
         if mask is None and s in _IN_FLIGHT:  # rules v1: avoid only where a layer clears
             acts = self.actions
             mask = np.zeros(acts.n, dtype=np.int8)
             mask[acts.continue_] = 1
-            mask[acts.avoid] = self._avoid_plan(v) is not None
+            mask[acts.avoid] = self._avoid_layer(v) is not None
             mask.setflags(write=False)
         elif mask is None:  # on the ground or hovering: the free nodes it may go to
             acts = self.actions

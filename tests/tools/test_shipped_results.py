@@ -21,7 +21,8 @@ DOCS = REPO_ROOT / "docs"
 SETS = check.find_sets(DOCS)
 #: The sets the docs report on; a missing one is a missing result, not a pass.
 EXPECTED = {"docs/results", "docs/results/transfer", "docs/results/scaling",
-            "docs/results/sweeps/wind"}
+            "docs/results/sweeps/wind", "docs/results/safety/u00", "docs/results/safety/u05",
+            "docs/results/safety/u10"}
 #: Learning-curve figures of PPO from scratch (docs/training.md): made before result files
 #: recorded their provenance, by `make curves` runs of hours that play no shipped checkpoint.
 UNRECORDED_FIGURES = {"curves_scratch.png", "curves_critic.png"}
