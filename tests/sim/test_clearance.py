@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from marl_vertiport.config import load_config, with_rules
-from marl_vertiport.sim.clearance import plan_distance, volume, volumes_clear
+from marl_vertiport.sim.volumes import plan_distance, volume, volumes_clear
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.invariants import violations
 from marl_vertiport.sim.schema import (

@@ -1,0 +1,128 @@
+"""Protected volumes, the geometry of the separation check (:mod:`~marl_vertiport.sim.clearance`):
+chains of vertical and level segments extended behind each start, the test of two volumes
+against the separation thresholds per axis, and the memos of those tests that every simulator
+of one geometry in a process shares. Pure functions and plain containers; no simulator state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: A segment of a volume: plan-view start and end, and the altitude range it spans,
+#: ``(ax, ay, bx, by, z_low, z_high)`` in metres (margins applied).
+Segment = tuple[float, float, float, float, float, float]
+Volume = tuple[Segment, ...]
+
+_EPS = 1e-9
+#: Entries kept in a memo of pure volume tests before it is emptied (bounds memory on long runs).
+MEMO_MAX = 20_000
+
+
+def volume(start, waypoints, margin_m: float, floor_z_m: float) -> Volume:
+    """The protected volume of a flight from ``start`` through ``waypoints`` (``(x, y, z)`` each):
+    one segment per leg, extended ``margin_m`` behind its start along its direction (a vertical
+    leg in altitude, no lower than ``floor_z_m``). A flight without waypoints is the point
+    ``start``."""
+    x0, y0, z0 = float(start[0]), float(start[1]), float(start[2])
+    if not len(waypoints):
+        return ((x0, y0, x0, y0, z0, z0),)
+    segs = []
+    for w in waypoints:
+        x1, y1, z1 = float(w[0]), float(w[1]), float(w[2])
+        dx, dy = x1 - x0, y1 - y0
+        h = math.hypot(dx, dy)
+        if h > _EPS:  # a level leg (every horizontal leg flown is level)
+            segs.append((x0 - dx / h * margin_m, y0 - dy / h * margin_m, x1, y1,
+                         z0 if z0 < z1 else z1, z1 if z0 < z1 else z0))
+        elif z1 > z0 + _EPS:  # a climb: the margin below its start
+            low = z0 - margin_m
+            segs.append((x0, y0, x1, y1, low if low > floor_z_m else floor_z_m, z1))
+        elif z1 < z0 - _EPS:  # a descent: the margin above its start
+            segs.append((x0, y0, x1, y1, z1, z0 + margin_m))
+        else:
+            segs.append((x0, y0, x0, y0, z0, z0))
+        x0, y0, z0 = x1, y1, z1
+    return tuple(segs)
+
+
+def _point_segment_sq(px, py, ax, ay, bx, by) -> float:
+    dx, dy = bx - ax, by - ay
+    dd = dx * dx + dy * dy
+    u = 0.0
+    if dd > _EPS:
+        u = min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / dd))
+    ex, ey = px - ax - u * dx, py - ay - u * dy
+    return ex * ex + ey * ey
+
+
+def plan_distance(s: Segment, t: Segment) -> float:
+    """Distance of the plan-view projections of two segments (0 where they cross)."""
+    ax, ay, bx, by = s[0], s[1], s[2], s[3]
+    cx, cy, dx, dy = t[0], t[1], t[2], t[3]
+    ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
+    den = ux * vy - uy * vx
+    if abs(den) > _EPS:
+        ex, ey = cx - ax, cy - ay
+        p = (ex * vy - ey * vx) / den
+        q = (ex * uy - ey * ux) / den
+        if 0.0 <= p <= 1.0 and 0.0 <= q <= 1.0:
+            return 0.0
+    return math.sqrt(min(_point_segment_sq(ax, ay, cx, cy, dx, dy),
+                         _point_segment_sq(bx, by, cx, cy, dx, dy),
+                         _point_segment_sq(cx, cy, ax, ay, bx, by),
+                         _point_segment_sq(dx, dy, ax, ay, bx, by)))
+
+
+def segments_clear(s: Segment, t: Segment, h_m: float, v_m: float) -> bool:
+    """Whether two segments keep ``v_m`` apart in altitude or ``h_m`` apart in plan view."""
+    if s[4] - t[5] >= v_m or t[4] - s[5] >= v_m:
+        return True
+    return plan_distance(s, t) >= h_m
+
+
+def volumes_clear(a: Volume, b: Volume, h_m: float, v_m: float) -> bool:
+    """Whether every segment of ``a`` is clear of every segment of ``b``."""
+    return all(segments_clear(s, t, h_m, v_m) for s in a for t in b)
+
+
+class VolumeMemo:
+    """Memos of pure functions of a vertiport's geometry and of reservations, shared by every
+    simulator of that geometry in a process (an env's copies, a planner's look-ahead sims, the
+    worker of an evaluation): the volumes named by small ints, their boxes, and which
+    clearances clear which reservation. ``gen`` counts the times it was emptied; a simulator
+    that finds it changed names its reservations again (:meth:`Clearance._check_memo`)."""
+
+    def __init__(self) -> None:
+        self.volume_ids: dict[Volume, int] = {}
+        self.volumes: list[Volume] = []
+        self.boxes: list[tuple] = []
+        self.node_ok: dict[tuple[int, int], np.ndarray] = {}
+        self.trip_ok: dict[tuple[int, int, int], bool] = {}
+        self.taxi_volumes: dict[int, list[Volume]] = {}
+        self.trip_volumes: dict[tuple[int, int], Volume] = {}
+        self.lifted: dict[tuple[int, int, bool], int] = {}
+        self.lifted_ok: dict[tuple[int, int], bool] = {}
+        self.releases: dict[tuple, tuple] = {}
+        self.gen = 0
+
+
+#: The memos by geometry, the most recently used last (a few layouts at a time).
+_MEMOS: dict[tuple, VolumeMemo] = {}
+_MEMOS_KEPT = 8
+
+
+def shared_memo(key: tuple) -> VolumeMemo:
+    memo = _MEMOS.pop(key, None) or VolumeMemo()
+    _MEMOS[key] = memo
+    while len(_MEMOS) > _MEMOS_KEPT:
+        del _MEMOS[next(iter(_MEMOS))]
+    return memo
+
+
+def box(vol: Volume) -> tuple[float, float, float, float, float, float]:
+    """Bounding box ``(x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)`` of a volume."""
+    xs = [c for s in vol for c in (s[0], s[2])]
+    ys = [c for s in vol for c in (s[1], s[3])]
+    return (min(xs), max(xs), min(ys), max(ys), min(s[4] for s in vol), max(s[5] for s in vol))
