@@ -56,7 +56,7 @@ test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward
 test-fast: $(STAMP)  ## the test suite without the full-episode tests
 	$(PY) -m pytest -q -m "not slow and not replay"
 
-check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (under a minute)
+check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (about a minute and a half on an idle 2-core AMD EPYC)
 	$(PY) -m pytest -q -m replay tests/tools/test_shipped_results.py
 
 soak: $(STAMP)  ## many days with every uncertainty high on six layouts: invariants after every step, memory (under a minute on an idle 2-core AMD EPYC)
@@ -97,7 +97,7 @@ results: $(STAMP)  ## regenerate every shipped result of the shipped policy: doc
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
 
-safety: $(STAMP)  ## every controller but the planner on every shipped layout at 0, 5 and 10 % uncertainty (gusts, charger and take-off failures), 50 test days a cell: losses of separation, contacts, minimum separation (docs/results/safety/)
+safety: $(STAMP)  ## every controller but the planner on every shipped layout at 0, 5 and 10 % uncertainty (gusts, charger and take-off failures), 50 test days a cell: losses of separation, contacts, minimum separation (docs/results/safety/; about 15 minutes on an idle 2-core AMD EPYC)
 	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --out docs/results/safety/u00 --report docs/results/safety/u00.md $(RUN_ON)
 	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --set uncertainty.wind_gust_prob=0.05 --set uncertainty.charger_failure_prob=0.05 --set uncertainty.takeoff_failure_prob=0.05 --out docs/results/safety/u05 --report docs/results/safety/u05.md $(RUN_ON)
 	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --set uncertainty.wind_gust_prob=0.1 --set uncertainty.charger_failure_prob=0.1 --set uncertainty.takeoff_failure_prob=0.1 --out docs/results/safety/u10 --report docs/results/safety/u10.md $(RUN_ON)
