@@ -41,7 +41,7 @@ from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, HOVERING, LEADING_ACTIONS, OUT_OF_SERVICE, STATUS_NAMES, TAXIING,
 )
 from marl_vertiport.sim.volumes import (
-    MEMO_MAX, Volume, VolumeMemo, box, shared_memo, volume, volumes_clear,
+    MEMO_MAX, Volume, VolumeMemo, box, boxes_apart, shared_memo, volume, volumes_clear,
 )
 
 _NODES = LEADING_ACTIONS
@@ -209,9 +209,7 @@ class Clearance:
         for u, rid in enumerate(self.reservation.tolist()):
             if u == v or rid < 0:
                 continue
-            ob = self._boxes[rid]
-            if (bx[0] - ob[1] >= h or ob[0] - bx[1] >= h or bx[2] - ob[3] >= h
-                    or ob[2] - bx[3] >= h or bx[4] - ob[5] >= vv or ob[4] - bx[5] >= vv):
+            if boxes_apart(bx, self._boxes[rid], h, vv):
                 continue
             if not volumes_clear(vol, self._volumes[rid], h, vv):
                 out.append(u)
@@ -264,10 +262,7 @@ class Clearance:
             for k, vol in enumerate(self._taxi_volume_list(node)):
                 if not vol:
                     continue
-                bx = box(vol)
-                far = (bx[0] - ob[1] >= h or ob[0] - bx[1] >= h or bx[2] - ob[3] >= h
-                       or ob[2] - bx[3] >= h or bx[4] - ob[5] >= vv or ob[4] - bx[5] >= vv)
-                ok[k] = far or volumes_clear(vol, other, h, vv)
+                ok[k] = boxes_apart(box(vol), ob, h, vv) or volumes_clear(vol, other, h, vv)
             ok.setflags(write=False)
             self._node_ok[key] = ok
         return ok
@@ -336,11 +331,8 @@ class Clearance:
     def _ids_clear(self, a: int, b: int) -> bool:
         """Whether interned volumes ``a`` and ``b`` are clear of each other."""
         h, vv = self.clear_h_m, self.clear_v_m
-        ba, bb = self._boxes[a], self._boxes[b]
-        if (ba[0] - bb[1] >= h or bb[0] - ba[1] >= h or ba[2] - bb[3] >= h
-                or bb[2] - ba[3] >= h or ba[4] - bb[5] >= vv or bb[4] - ba[5] >= vv):
-            return True
-        return volumes_clear(self._volumes[a], self._volumes[b], h, vv)
+        return (boxes_apart(self._boxes[a], self._boxes[b], h, vv)
+                or volumes_clear(self._volumes[a], self._volumes[b], h, vv))
 
     def _lifted_id(self, v: int, k: int, alt: float) -> int:
         """The id of vehicle ``v``'s reservation lifted to avoidance layer ``k`` at ``alt``: its

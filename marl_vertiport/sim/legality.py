@@ -72,15 +72,13 @@ class Legality:
                     mask[acts.takeoff] = self.energy.trip_pct[node, self.dest.item(v)] < budget
             if self.sep_check:  # clear only flights whose volume clears every reservation
                 self._apply_separation_check(v, mask, s != HOVERING)
-            if atc.energy_check:
-                if s == HOVERING:  # hold only while a landing can still be cleared at the next turn
-                    node = self.node.item(v)
-                    budget = self.battery.item(v) - atc.energy_reserve_pct
-                    hop = self.energy.hop_pct[node]
-                    ports = np.flatnonzero(mask[_NODES:_NODES + self.layout.n_ports])
-                    if ports.size and budget - self._hold_pct <= hop[ports].min():
-                        mask[acts.stay] = 0
-                        mask[_NODES + self.layout.n_ports:_NODES + self.layout.n_nodes] = 0
+            if atc.energy_check and s == HOVERING:
+                # Hold only while a landing (one both checks clear) can still be cleared at the
+                # next turn.
+                ports = np.flatnonzero(mask[_NODES:_NODES + self.layout.n_ports])
+                if ports.size and budget - self._hold_pct <= hop[ports].min():
+                    mask[acts.stay] = 0
+                    mask[_NODES + self.layout.n_ports:_NODES + self.layout.n_nodes] = 0
             mask.setflags(write=False)
         self._mask_cache[v] = mask
         return mask

@@ -200,9 +200,10 @@ class Lifecycle:
 
     def _take_out_of_service(self, v: int) -> None:
         """Battery depleted in the air: emergency landing where it is, out of service for the
-        rest of the day. If it comes down within two vehicle sizes of a free port it takes the
-        nearest such port, so nothing lands on top of it; it never comes down on or inside a
-        vehicle on the ground (:meth:`_clear_landing_xy`). A late
+        rest of the day. Rules v0: if it comes down within two vehicle sizes of a free port it
+        takes the nearest such port, so nothing lands on top of it; rules v1: it comes down
+        clear of every reservation instead. It never comes down on or inside a vehicle on the
+        ground (:meth:`_clear_landing_xy`). A late
         operation it leaves undone keeps its lateness (at the end of this step) in the metrics."""
         if self.pending_kind[v] != NO_OPERATION:
             self.completed_delay[v] += self.schedule.lateness_min(
@@ -219,23 +220,19 @@ class Lifecycle:
             self.slot_of[v] = -1
             self._holding.discard(v)
             self._waiting_outside.discard(v)
-            if inside:
-                self.pos[v, 2] = self.park_z_m
-                self.pos[v, :2] = self._clear_landing_xy(v)
-                self.physics.make_static(v, self.pos[v])
-            else:  # down outside the airspace: out of the ATC's picture, as a vehicle away
-                self._gone.add(v)
-            self._reserve(v)
-            return
         if inside:
             self.pos[v, 2] = self.park_z_m
-            d = np.linalg.norm(self.layout.node_xy_m - self.pos[v, :2], axis=1)
-            near = np.flatnonzero((d < self.cfg.flight.vehicle_size_m * 2) & self._is_port
-                                  & (self.node_occupant == -1))
-            if near.size:
-                self._occupy(v, int(near[np.argmin(d[near])]))
+            if not self.sep_check:  # rules v0: onto a free port close by, if there is one
+                d = np.linalg.norm(self.layout.node_xy_m - self.pos[v, :2], axis=1)
+                near = np.flatnonzero((d < self.cfg.flight.vehicle_size_m * 2) & self._is_port
+                                      & (self.node_occupant == -1))
+                if near.size:
+                    self._occupy(v, int(near[np.argmin(d[near])]))
             self.pos[v, :2] = self._clear_landing_xy(v)
             self.physics.make_static(v, self.pos[v])
+        elif self.sep_check:  # down outside the airspace: out of the ATC's picture, as if away
+            self._gone.add(v)
+        self._reserve(v)
 
     def _clear_landing_xy(self, v: int) -> np.ndarray:
         """Where vehicle ``v`` comes down in an emergency landing: straight below it, or, when

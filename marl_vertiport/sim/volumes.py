@@ -126,3 +126,11 @@ def box(vol: Volume) -> tuple[float, float, float, float, float, float]:
     xs = [c for s in vol for c in (s[0], s[2])]
     ys = [c for s in vol for c in (s[1], s[3])]
     return (min(xs), max(xs), min(ys), max(ys), min(s[4] for s in vol), max(s[5] for s in vol))
+
+
+def boxes_apart(a: tuple, b: tuple, h_m: float, v_m: float) -> bool:
+    """Whether bounding boxes ``a`` and ``b`` (:func:`box`) are ``h_m`` apart along x or y, or
+    ``v_m`` apart in altitude: then every segment of one volume is clear of every segment of the
+    other (the quick test before :func:`volumes_clear`)."""
+    return (a[0] - b[1] >= h_m or b[0] - a[1] >= h_m or a[2] - b[3] >= h_m
+            or b[2] - a[3] >= h_m or a[4] - b[5] >= v_m or b[4] - a[5] >= v_m)
