@@ -195,6 +195,12 @@ class ATCConfig:
     along_track_margin_m: float = 2.0
     """Rules v1: each segment of a protected volume extends this far behind its start, and a
     reversing gust pushes a vehicle back no farther (one step of flight at cruise speed)."""
+    trail_departures: bool = True
+    """Rules v1: a flight may be cleared behind a departing vehicle whose reservation it does not
+    clear (a departure leaves the airspace, and its reservation only shrinks until then); the
+    simulator holds the follower, each step, wherever its next step of flight would not clear
+    that reservation. False: every reservation must be clear at the clearance (whole-leg
+    reservations only)."""
     holding_slots: int = 0
     """Rules v1: holding slots at the airspace boundary, at the arrival altitude; 0: one per
     vehicle (at least one per destination), as many as fit ``2 x`` the horizontal threshold

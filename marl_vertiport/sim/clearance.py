@@ -59,6 +59,7 @@ class Clearance:
     def _init_clearance(self) -> None:
         atc, lay = self.cfg.atc, self.layout
         self.sep_check = atc.separation_check
+        self.trail = self.sep_check and atc.trail_departures
         sep = self.cfg.safety.min_separation_m
         self.clear_h_m = sep + atc.horizontal_buffer_m
         self.clear_v_m = sep + atc.vertical_buffer_m
@@ -103,7 +104,7 @@ class Clearance:
         memo = self._memo
         if len(memo.volumes) >= MEMO_MAX:
             for table in (memo.volume_ids, memo.volumes, memo.boxes, memo.node_ok, memo.trip_ok,
-                          memo.lifted, memo.lifted_ok, memo.releases):
+                          memo.lifted, memo.lifted_ok, memo.pair_ok, memo.releases):
                 table.clear()
             memo.gen += 1
         self._memo_gen = memo.gen
@@ -201,22 +202,25 @@ class Clearance:
         for v, vol in enumerate(self.reserved):
             self.reservation[v] = -1 if vol is None else self._intern(vol)
 
-    def _blockers(self, vol: Volume, v: int) -> list[int]:
-        """The vehicles other than ``v`` whose reservation ``vol`` does not clear."""
+    def _blockers(self, vol: Volume, v: int, trail: bool = False) -> list[int]:
+        """The vehicles other than ``v`` whose reservation ``vol`` does not clear (with
+        ``trail`` and ``atc.trail_departures``, departing vehicles excepted: a clearance may
+        follow them, :meth:`_note_leaders`)."""
         h, vv = self.clear_h_m, self.clear_v_m
         bx = box(vol)
         out = []
+        status = self.status.tolist() if trail and self.trail else None
         for u, rid in enumerate(self.reservation.tolist()):
-            if u == v or rid < 0:
-                continue
+            if u == v or rid < 0 or (status is not None and status[u] == DEPARTING):
+                continue  # a clearance may follow a departure (trail_departures)
             if boxes_apart(bx, self._boxes[rid], h, vv):
                 continue
             if not volumes_clear(vol, self._volumes[rid], h, vv):
                 out.append(u)
         return out
 
-    def _clear_of_others(self, vol: Volume, v: int) -> bool:
-        return not self._blockers(vol, v)
+    def _clear_of_others(self, vol: Volume, v: int, trail: bool = False) -> bool:
+        return not self._blockers(vol, v, trail)
 
     # ---------------------------------------------------------------- candidate volumes
     def _taxi_volume_list(self, node: int) -> list[Volume]:
@@ -285,9 +289,10 @@ class Clearance:
         nodes = mask[_NODES:_NODES + p]
         check_trip = on_ground and mask[self.actions.takeoff]
         dest = self.dest.item(v)
+        status = self.status.tolist() if self.trail else None
         for u, rid in enumerate(self.reservation.tolist()):
-            if u == v or rid < 0:
-                continue
+            if u == v or rid < 0 or (status is not None and status[u] == DEPARTING):
+                continue  # a clearance may follow a departure (trail_departures)
             nodes &= self._node_clearances(node, rid)
             if check_trip and not self._trip_clearance(node, dest, rid):
                 mask[self.actions.takeoff] = 0
@@ -406,7 +411,7 @@ class Clearance:
         position clears every other reservation."""
         keep = [k for k in free.tolist()
                 if self._clear_of_others(volume(self.pos[v], self._arrival_route(self.pos[v], k),
-                                                self.margin_m, self.park_z_m), v)]
+                                                self.margin_m, self.park_z_m), v, trail=True)]
         return np.asarray(keep, dtype=np.int64)
 
     def _landing_point_clear(self, v: int, xy: np.ndarray) -> bool:
@@ -460,7 +465,7 @@ class Clearance:
                 self.battery.item(v) - atc.energy_reserve_pct:
             return "energy"
         if vol is not None:
-            blockers = self._blockers(vol, v)
+            blockers = self._blockers(vol, v, trail=True)
             if blockers:
                 return "separation: " + ", ".join(f"evtol_{u}" for u in blockers)
         return "energy"  # the hover-hold rule of the energy check

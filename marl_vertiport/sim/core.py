@@ -51,6 +51,7 @@ from marl_vertiport.sim.schema import (
 )
 from marl_vertiport.sim.separation import Separation
 from marl_vertiport.sim.stranding import Stranding
+from marl_vertiport.sim.trailing import Trailing
 from marl_vertiport.sim.uncertainty import Uncertainty
 
 __all__ = ["IllegalActionError", "VertiportSim"]
@@ -87,7 +88,8 @@ def _copied(value: Any) -> Any:
     return copy.deepcopy(value)
 
 
-class VertiportSim(Legality, Clearance, Lifecycle, Motion, Separation, Stranding, Features):
+class VertiportSim(Legality, Clearance, Trailing, Lifecycle, Motion, Separation, Stranding,
+                   Features):
     """One vertiport, its fleet, and the round-robin ATC turn.
 
     This class holds the state of the day and the order of a step; each concern of the step is
@@ -196,6 +198,11 @@ class VertiportSim(Legality, Clearance, Lifecycle, Motion, Separation, Stranding
         self.slot_of = np.full(n, -1, dtype=np.int64)
         self._waiting_outside: set[int] = set()
         self._gone: set[int] = set()  # out of service outside the airspace
+        # Rules v1, trailing a departure: each vehicle's clearance number (newer: larger) and the
+        # departing vehicles it yields to (its leaders).
+        self.clear_seq = np.zeros(n, dtype=np.int64)
+        self._clear_count = 0
+        self.leaders: list[tuple[int, ...]] = [()] * n
 
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new day: vehicles placed on random ports (then hover spots), full batteries,

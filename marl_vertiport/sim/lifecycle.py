@@ -41,6 +41,8 @@ class Lifecycle:
         self.leg_alt[v] = leg_alt_m
         self.seg_from[v] = self.pos[v]
         self._reserve(v)
+        if self.trail:
+            self._note_leaders(v)
 
     def _local_route(self, v: int, node: int) -> list[np.ndarray]:
         """Route at hover altitude from the vehicle to vertiport node ``node``."""

@@ -53,6 +53,7 @@ class Motion:
         seg_from = self.seg_from.tolist() if self.sep_check and keep is not None else None
         margin = self.margin_m
         end = list(start)
+        lead = self.leaders if self.trail else None
         bodies, body_vel, body_keep = [], [], []
         for k, v in enumerate(moving):
             px, py, pz = start[v]
@@ -61,6 +62,9 @@ class Motion:
             dist = math.sqrt(dx * dx + dy * dy + dz * dz)
             scale = (step_len / dist if dist > step_len else 1.0) / dt
             vel = (dx * scale, dy * scale, dz * scale)
+            if lead is not None and lead[v] and status[v] != AWAY and self._must_hold(
+                    v, (px, py, pz), (px + vel[0] * dt, py + vel[1] * dt, pz + vel[2] * dt)):
+                vel = (0.0, 0.0, 0.0)  # trailing a departure: hold until the way clears
             cmd_vel[v] = vel
             f = 1.0 if keep is None else keep[k]
             if f < 0.0 and vel[2] > 0.0 and pz + vel[2] * dt * f < park_z:

@@ -104,6 +104,7 @@ class VolumeMemo:
         self.trip_volumes: dict[tuple[int, int], Volume] = {}
         self.lifted: dict[tuple[int, int, bool], int] = {}
         self.lifted_ok: dict[tuple[int, int], bool] = {}
+        self.pair_ok: dict[tuple[int, int], bool] = {}
         self.releases: dict[tuple, tuple] = {}
         self.gen = 0
 

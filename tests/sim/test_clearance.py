@@ -102,16 +102,55 @@ def test_take_off_under_an_inbound_vehicle_is_masked_until_it_is_down():
     assert sim.action_mask(0)[TAKEOFF] == 1
 
 
-def test_a_move_across_a_pad_in_use_is_masked_while_the_departure_climbs():
+def test_a_move_across_a_pad_in_use_follows_the_departure_and_holds_until_its_way_clears():
     sim = make()
     park(sim, 0, 0)  # evtol_0 on normal port 0
     park(sim, 1, 3)  # evtol_1 hovering at (-14, 0): its way to normal port 1 crosses port 0
     sim.acting = 0
     sim.step(TAKEOFF)  # evtol_0 climbs from port 0
     assert sim.status[0] == DEPARTING
-    assert sim.action_mask(1)[node_action(sim, 1)] == 0
-    assert sim.mask_reasons(1)[node_action(sim, 1)] == "separation: evtol_0"
+    to_port1 = node_action(sim, 1)
+    assert sim.action_mask(1)[to_port1] == 1  # cleared behind the departure,
+    sim.acting = 1
+    sim.step(to_port1)
+    assert sim.leaders[1] == (0,)  # following it
+    acts, held, flown = sim.actions, 0, 0
+    for _ in range(40):
+        before = sim.pos[1].copy()
+        a = acts.continue_ if sim.action_mask(sim.acting)[acts.continue_] else STAY
+        sim.step(a)
+        assert violations(sim) == []  # never within the separation
+        if sim.status[1] == TAXIING:
+            moved = np.abs(sim.pos[1] - before).max() > 1e-9
+            held += not moved
+            flown += moved
+    assert held >= 2 and flown >= 5  # it held while the climb was in its way, then went on
+    assert sim.status[1] == ON_PORT and sim.node[1] == 1 and sim.leaders[1] == ()
+    # Without trailing, the move stays masked while the departure climbs.
+    sim = make(**{"atc.trail_departures": False})
+    park(sim, 0, 0)
+    park(sim, 1, 3)
+    sim.acting = 0
+    sim.step(TAKEOFF)
+    assert sim.action_mask(1)[to_port1] == 0
+    assert sim.mask_reasons(1)[to_port1] == "separation: evtol_0"
     assert sim.action_mask(1)[node_action(sim, 6)] == 1  # to (0, -12): clear of it
+
+
+def test_a_vehicle_yields_only_to_older_clearances():
+    sim = make(fleet=3)
+    park(sim, 0, 0)  # evtol_0 on normal port 0
+    park(sim, 1, 1)  # evtol_1 on normal port 1
+    park(sim, 2, 3)  # evtol_2 hovering at (-14, 0)
+    sim.acting = 0
+    sim.step(TAKEOFF)
+    sim.acting = 1
+    sim.step(TAKEOFF)
+    sim.acting = 2
+    sim.step(node_action(sim, 0))  # to port 0, behind evtol_0's climb
+    assert sim.clear_seq[0] < sim.clear_seq[1] < sim.clear_seq[2]
+    assert 1 not in sim.leaders[0] and 2 not in sim.leaders[0] and 2 not in sim.leaders[1]
+    assert 0 in sim.leaders[2]
 
 
 def test_overlapping_clearances_mask_the_second_and_disjoint_ones_are_both_legal():
