@@ -23,10 +23,12 @@ A clearance (a take-off, a move to a node, an avoidance climb, a hover spot for 
 vehicle, a holding slot) is legal only if its volume clears every other vehicle's reservation;
 the action mask says so (:meth:`Clearance.mask_reasons` says why an action is masked).
 
-Procedures (docs/environment.md, section 6): departures climb on their pad and leave on their
-destination's bearing at the transit altitude; arrivals come back at ``flight.arrival_altitude_m``
-(a layer above) to a holding slot of their own on the airspace boundary, and go from there to a
-hover spot when the route clears. Emergency landings come down outside every reserved volume.
+Procedures (docs/environment.md, section 7.4): departures climb on their pad to
+``flight.departure_altitude_m``, above every other flow, and leave on their destination's
+bearing; arrivals come back at ``flight.arrival_altitude_m`` to a holding slot of their own on
+the airspace boundary, and go from there to a hover spot when the route clears. Emergency
+landings come down outside every reserved volume. A clearance may follow a departure
+(:mod:`~.trailing`); the avoidance climb is :mod:`~.avoidance`'s.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ import numpy as np
 from marl_vertiport.sim.energy import local_route
 from marl_vertiport.sim.layout import HOVER_SPOT
 from marl_vertiport.sim.schema import (
-    ARRIVING, AWAY, DEPARTING, HOVERING, LEADING_ACTIONS, OUT_OF_SERVICE, STATUS_NAMES, TAXIING,
+    ARRIVING, AWAY, DEPARTING, HOVERING, LEADING_ACTIONS, OUT_OF_SERVICE, TAXIING,
 )
 from marl_vertiport.sim.volumes import (
     MEMO_MAX, Volume, VolumeMemo, box, boxes_apart, shared_memo, volume, volumes_clear,
@@ -102,9 +104,12 @@ class Clearance:
         """Empty the memos when they have grown large (at the start of a day; every simulator
         sharing them names its reservations again before it next uses them)."""
         memo = self._memo
-        if len(memo.volumes) >= MEMO_MAX:
+        if max(len(memo.volumes), len(memo.hold), len(memo.avoid), len(memo.masks),
+               len(memo.spots)) >= MEMO_MAX:
             for table in (memo.volume_ids, memo.volumes, memo.boxes, memo.node_ok, memo.trip_ok,
-                          memo.lifted, memo.lifted_ok, memo.pair_ok, memo.releases):
+                          memo.lifted, memo.lifted_ok, memo.pair_ok, memo.avoid, memo.hold,
+                          memo.route_ids, memo.flights, memo.masks, memo.spots,
+                          memo.slot_order, memo.releases):
                 table.clear()
             memo.gen += 1
         self._memo_gen = memo.gen
@@ -136,15 +141,22 @@ class Clearance:
                 self.reservation[v] = -1
                 self.reserved[v] = None
                 return
-            vol = volume(self.slot_pos[slot], (), 0.0, self.park_z_m)
+            vid = self._route_id(self.slot_pos[slot], ("at",), tuple)
         elif self.has_target[v] and s in (TAXIING, DEPARTING, ARRIVING):
-            vol = volume(self.seg_from[v], [self.target[v]] + self.routes[v], self.margin_m,
-                         self.park_z_m)
-            self._note_release(v, self.seg_from[v].tolist(), self.target[v].tolist())
+            # A leg's volume and its quick release test, memoised by the leg's points.
+            s0, t0 = self.seg_from[v].tolist(), self.target[v].tolist()
+            key = (*s0, *t0, *(c for w in self.routes[v] for c in w.tolist()))
+            done = self._memo.flights.get(key)
+            if done is None:
+                vol = volume(s0, [t0] + self.routes[v], self.margin_m, self.park_z_m)
+                self._note_release(v, s0, t0)
+                done = (self._intern(vol), self.release_at[v])
+                self._memo.flights[key] = done
+            vid, self.release_at[v] = done
         else:
-            vol = volume(self.pos[v], (), 0.0, self.park_z_m)
-        self.reservation[v] = self._intern(vol)
-        self.reserved[v] = vol
+            vid = self._route_id(self.pos[v], ("at",), tuple)
+        self.reservation[v] = vid
+        self.reserved[v] = self._volumes[vid]
 
     def _note_release(self, v: int, s: list[float], t: list[float]) -> None:
         """Keep, for the quick test of :meth:`_advance_reservation`, vehicle ``v``'s segment
@@ -169,7 +181,7 @@ class Clearance:
         sx, sy, sz, ux, uy, uz, first = quick
         if (p[0] - sx) * ux + (p[1] - sy) * uy + (p[2] - sz) * uz < first:
             return  # not yet a whole quantum flown: nothing to release
-        s = self.seg_from[v].tolist()
+        s = quick  # its first three: where the segment began (seg_from), as noted
         ux, uy, uz = t[0] - s[0], t[1] - s[1], t[2] - s[2]
         seg_m = math.sqrt(ux * ux + uy * uy + uz * uz)
         if seg_m <= _EPS:
@@ -221,6 +233,28 @@ class Clearance:
 
     def _clear_of_others(self, vol: Volume, v: int, trail: bool = False) -> bool:
         return not self._blockers(vol, v, trail)
+
+    def _id_clear_of_others(self, vid: int, v: int, trail: bool = False) -> bool:
+        """:meth:`_clear_of_others` for the interned volume ``vid`` (memoised per pair)."""
+        status = self.status.tolist() if trail and self.trail else None
+        for u, rid in enumerate(self.reservation.tolist()):
+            if u == v or rid < 0 or (status is not None and status[u] == DEPARTING):
+                continue
+            if not self._pair_clear(vid, rid):
+                return False
+        return True
+
+    def _route_id(self, start: np.ndarray, key: tuple, route) -> int:
+        """The interned volume of a flight from ``start`` along ``route()`` (a callable, called
+        only the first time), memoised by ``start`` and ``key``."""
+        full = (float(start[0]), float(start[1]), float(start[2])) + key
+        vid = self._memo.route_ids.get(full)
+        if vid is None:
+            waypoints = route()
+            vid = self._intern(volume(start, waypoints, self.margin_m if waypoints else 0.0,
+                                      self.park_z_m))
+            self._memo.route_ids[full] = vid
+        return vid
 
     # ---------------------------------------------------------------- candidate volumes
     def _taxi_volume_list(self, node: int) -> list[Volume]:
@@ -290,48 +324,23 @@ class Clearance:
         check_trip = on_ground and mask[self.actions.takeoff]
         dest = self.dest.item(v)
         status = self.status.tolist() if self.trail else None
-        for u, rid in enumerate(self.reservation.tolist()):
-            if u == v or rid < 0 or (status is not None and status[u] == DEPARTING):
-                continue  # a clearance may follow a departure (trail_departures)
-            nodes &= self._node_clearances(node, rid)
-            if check_trip and not self._trip_clearance(node, dest, rid):
-                mask[self.actions.takeoff] = 0
-                check_trip = False
-
-    def _avoid_layer(self, v: int) -> int | None:
-        """Rules v1: the avoidance layer vehicle ``v`` in flight may climb to now (the lowest
-        free layer above its leg whose lifted volume clears every other reservation), ``-1``
-        for a hold in place (no horizontal travel left: the vehicle stays inside its volume),
-        ``None`` when none clears, when it already flies on a layer or holds without a route.
-
-        The test uses the vehicle's reservation lifted to the layer (:meth:`_lifted_id`), which
-        holds the avoidance route from anywhere the vehicle may be on its current segment, so
-        the answer is memoised per reservation, not per position."""
-        if not self.has_target[v] or self.avoid_layer[v] >= 0:
-            return None
-        x, y = self.pos[v, 0], self.pos[v, 1]
-        waypoints = [self.target[v]] + self.routes[v]
-        if not any(math.hypot(w[0] - x, w[1] - y) > 1e-9 for w in waypoints):
-            return -1
-        used = set(self.avoid_layer[self.avoid_layer >= 0].tolist())
-        others = [rid for u, rid in enumerate(self.reservation.tolist()) if u != v and rid >= 0]
-        memo = self._memo
-        for k, alt in enumerate(self.cfg.flight.avoid_altitudes_m):
-            if k in used or alt <= self.leg_alt.item(v):  # a climb, never a descent
-                continue
-            lid = self._lifted_id(v, k, alt)
-            clear = True
-            for rid in others:
-                ok = memo.lifted_ok.get((lid, rid))
-                if ok is None:
-                    ok = self._ids_clear(lid, rid)
-                    memo.lifted_ok[(lid, rid)] = ok
-                if not ok:
-                    clear = False
-                    break
-            if clear:
-                return k
-        return None
+        # A clearance may follow a departure (trail_departures): its reservation is left out.
+        rids = tuple(rid for u, rid in enumerate(self.reservation.tolist())
+                     if u != v and rid >= 0 and (status is None or status[u] != DEPARTING))
+        key = (node, dest if on_ground else -1, rids)
+        done = self._memo.masks.get(key)
+        if done is None:
+            ok = np.ones(p, dtype=np.int8)
+            trip = on_ground
+            for rid in rids:
+                ok &= self._node_clearances(node, rid)
+                trip = trip and self._trip_clearance(node, dest, rid)
+            ok.setflags(write=False)
+            done = (ok, trip)
+            self._memo.masks[key] = done
+        nodes &= done[0]
+        if check_trip and not done[1]:
+            mask[self.actions.takeoff] = 0
 
     def _ids_clear(self, a: int, b: int) -> bool:
         """Whether interned volumes ``a`` and ``b`` are clear of each other."""
@@ -339,80 +348,41 @@ class Clearance:
         return (boxes_apart(self._boxes[a], self._boxes[b], h, vv)
                 or volumes_clear(self._volumes[a], self._volumes[b], h, vv))
 
-    def _lifted_id(self, v: int, k: int, alt: float) -> int:
-        """The id of vehicle ``v``'s reservation lifted to avoidance layer ``k`` at ``alt``: its
-        current segment as a curtain from the margin below it up to the layer (the climb may
-        start anywhere on it), its later level legs at the layer, its later climbs and descents
-        as columns reaching the layer with the margin, and, but for a departure, the final
-        descent from the layer. The avoidance route from any point of the current segment lies
-        inside it."""
-        departing = self.status.item(v) == DEPARTING
-        key = (self.reservation.item(v), k, departing)
-        lid = self._memo.lifted.get(key)
-        if lid is None:
-            own = self.reserved[v]
-            m, floor = self.margin_m, self.park_z_m
-            ax, ay, bx, by, zlo, zhi = own[0]
-            segs = [(ax, ay, bx, by, max(zlo - m, floor), max(zhi, alt))]
-            for t in own[1:]:
-                if t[0] != t[2] or t[1] != t[3]:  # a level leg
-                    segs.append((t[0], t[1], t[2], t[3], alt, alt))
-                else:
-                    segs.append((t[0], t[1], t[2], t[3], min(t[4], alt), max(t[5], alt + m)))
-            final = (self.routes[v][-1] if self.routes[v] else self.target[v]).tolist()
-            if not departing and abs(final[2] - alt) > 1e-9:
-                segs.append((final[0], final[1], final[0], final[1], min(final[2], alt),
-                             max(final[2], alt) + m))
-            lid = self._intern(tuple(segs))
-            self._memo.lifted[key] = lid
-        return lid
-
-    def _avoid_plan(self, v: int) -> tuple[int, list[np.ndarray]] | None:
-        """Rules v1: ``(layer, route)`` of the avoidance climb :meth:`_avoid_layer` clears,
-        ``(-1, [])`` for a hold in place, ``None`` when none is cleared."""
-        k = self._avoid_layer(v)
-        if k is None or k < 0:
-            return None if k is None else (-1, [])
-        waypoints = [self.target[v]] + self.routes[v]
-        horizontal = [w for w in waypoints if math.hypot(w[0] - self.pos[v, 0],
-                                                         w[1] - self.pos[v, 1]) > 1e-9]
-        return k, self._avoid_route(v, self.cfg.flight.avoid_altitudes_m[k], waypoints,
-                                    horizontal)
-
-    def _avoid_route(self, v: int, alt: float, waypoints: list, horizontal: list
-                     ) -> list[np.ndarray]:
-        final = waypoints[-1]
-        new_route = [np.array([self.pos[v, 0], self.pos[v, 1], alt])]
-        for w in horizontal:
-            new_route.append(np.array([w[0], w[1], alt]))
-        if abs(final[2] - alt) > 1e-9 and self.status[v] != DEPARTING:
-            new_route.append(final.copy())
-        route = [new_route[0]]
-        for w in new_route[1:]:
-            if np.any(np.abs(w - route[-1]) > 1e-9):
-                route.append(w)
-        return route
-
     # ---------------------------------------------------------------- arrivals
     def _free_slot(self, v: int) -> int:
         """Rules v1: the free holding slot nearest to the bearing of vehicle ``v`` (away, at its
         destination) whose point clears every reservation, or -1."""
         taken = set(self.slot_of[self.slot_of >= 0].tolist())
-        d = np.hypot(self.slot_pos[:, 0] - self.pos[v, 0], self.slot_pos[:, 1] - self.pos[v, 1])
-        for k in np.argsort(d, kind="stable").tolist():
+        here = (self.pos.item(v, 0), self.pos.item(v, 1))
+        order = self._memo.slot_order.get(here)
+        if order is None:
+            d = np.hypot(self.slot_pos[:, 0] - here[0], self.slot_pos[:, 1] - here[1])
+            order = self._memo.slot_order[here] = np.argsort(d, kind="stable").tolist()
+        for k in order:
             if k in taken:
                 continue
-            if self._clear_of_others(volume(self.slot_pos[k], (), 0.0, self.park_z_m), v):
+            if self._id_clear_of_others(self._route_id(self.slot_pos[k], ("slot",), tuple), v):
                 return k
         return -1
 
     def _clear_hover_spots(self, v: int, free: np.ndarray) -> np.ndarray:
         """Of the free hover spots ``free``, those whose arrival route from vehicle ``v``'s
         position clears every other reservation."""
-        keep = [k for k in free.tolist()
-                if self._clear_of_others(volume(self.pos[v], self._arrival_route(self.pos[v], k),
-                                                self.margin_m, self.park_z_m), v, trail=True)]
-        return np.asarray(keep, dtype=np.int64)
+        pos = self.pos[v]
+        status = self.status.tolist() if self.trail else None
+        rids = tuple(-1 if u == v or (status is not None and status[u] == DEPARTING) else rid
+                     for u, rid in enumerate(self.reservation.tolist()))
+        spots = free.tolist()
+        key = (*pos.tolist(), rids, *spots)
+        kept = self._memo.spots.get(key)
+        if kept is None:
+            kept = np.asarray(
+                [k for k in spots if self._id_clear_of_others(
+                    self._route_id(pos, ("arrival", k), lambda k=k: self._arrival_route(pos, k)),
+                    v, trail=True)], dtype=np.int64)
+            kept.setflags(write=False)
+            self._memo.spots[key] = kept
+        return kept
 
     def _landing_point_clear(self, v: int, xy: np.ndarray) -> bool:
         """Rules v1: whether vehicle ``v`` may come down at ``xy`` in an emergency landing: its
@@ -469,10 +439,3 @@ class Clearance:
             if blockers:
                 return "separation: " + ", ".join(f"evtol_{u}" for u in blockers)
         return "energy"  # the hover-hold rule of the energy check
-
-    def _avoid_reason(self, v: int) -> str:
-        if not self.has_target[v]:
-            return f"status ({STATUS_NAMES[self.status.item(v)]}, holding)"
-        if self.avoid_layer[v] >= 0:
-            return "status (already on an avoidance layer)"
-        return "separation (no avoidance layer clears)"

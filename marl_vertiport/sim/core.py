@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from marl_vertiport.config import EnvConfig
+from marl_vertiport.sim.avoidance import Avoidance
 from marl_vertiport.sim.battery import BatteryModel
 from marl_vertiport.sim.clearance import Clearance
 from marl_vertiport.sim.energy import FlightEnergy
@@ -88,8 +89,8 @@ def _copied(value: Any) -> Any:
     return copy.deepcopy(value)
 
 
-class VertiportSim(Legality, Clearance, Trailing, Lifecycle, Motion, Separation, Stranding,
-                   Features):
+class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, Separation,
+                   Stranding, Features):
     """One vertiport, its fleet, and the round-robin ATC turn.
 
     This class holds the state of the day and the order of a step; each concern of the step is

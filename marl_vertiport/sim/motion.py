@@ -112,11 +112,15 @@ class Motion:
             return 0
         touchdowns = 0
         targets = self.target.tolist()
+        release_at = self.release_at if self.sep_check else None
         for v in self._moved:
             p, t = end[v], targets[v]
             if max(abs(p[0] - t[0]), abs(p[1] - t[1]), abs(p[2] - t[2])) >= 1e-6:
-                if self.sep_check:
-                    self._advance_reservation(v, p, t)
+                if release_at is not None:
+                    q = release_at[v]  # the quick test of _advance_reservation, inline
+                    if q is not None and ((p[0] - q[0]) * q[3] + (p[1] - q[1]) * q[4]
+                                          + (p[2] - q[2]) * q[5]) >= q[6]:
+                        self._advance_reservation(v, p, t)
                 continue
             if self.routes[v]:
                 self.seg_from[v] = self.target[v]

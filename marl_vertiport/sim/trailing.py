@@ -56,19 +56,27 @@ class Trailing:
         reservation of a leader. Leaders whose reservation now clears ``v``'s, or that hold a
         newer clearance than ``v``'s, or none, are dropped. A leader's reservation only
         shrinks, so space the sweep finds clear stays clear."""
-        sweep = volume(p, (q,), self.margin_m, self.park_z_m)
-        bx = box(sweep)
-        h, vv = self.clear_h_m, self.clear_v_m
         own = self.reservation.item(v)
         seq = self.clear_seq
-        keep, hold = [], False
+        memo = self._memo.hold
+        keep, hold, sweep = [], False, None
         for u in self.leaders[v]:
             rid = self.reservation.item(u)
             if rid < 0 or seq.item(u) > seq.item(v) or self._pair_clear(own, rid):
                 continue
             keep.append(u)
-            if not hold and not (boxes_apart(bx, self._boxes[rid], h, vv)
-                                 or volumes_clear(sweep, self._volumes[rid], h, vv)):
-                hold = True
+            if hold:
+                continue
+            key = (p, q, rid)
+            blocked = memo.get(key)
+            if blocked is None:
+                if sweep is None:
+                    sweep = volume(p, (q,), self.margin_m, self.park_z_m)
+                    bx = box(sweep)
+                h, vv = self.clear_h_m, self.clear_v_m
+                blocked = not (boxes_apart(bx, self._boxes[rid], h, vv)
+                               or volumes_clear(sweep, self._volumes[rid], h, vv))
+                memo[key] = blocked
+            hold = blocked
         self.leaders[v] = tuple(keep)
         return hold

@@ -105,6 +105,13 @@ class VolumeMemo:
         self.lifted: dict[tuple[int, int, bool], int] = {}
         self.lifted_ok: dict[tuple[int, int], bool] = {}
         self.pair_ok: dict[tuple[int, int], bool] = {}
+        self.avoid: dict[tuple, int | None] = {}
+        self.hold: dict[tuple, bool] = {}
+        self.route_ids: dict[tuple, int] = {}
+        self.flights: dict[tuple, tuple] = {}
+        self.masks: dict[tuple, tuple] = {}
+        self.spots: dict[tuple, np.ndarray] = {}
+        self.slot_order: dict[tuple, list[int]] = {}
         self.releases: dict[tuple, tuple] = {}
         self.gen = 0
 

@@ -279,21 +279,23 @@ def test_rules_v0_keep_the_old_masks_and_no_reservations():
 # ------------------------------------------------------------------ random play
 @pytest.fixture(scope="module")
 def shipped_sims():
-    made = {c: VertiportSim(load_config(c, **TEN)) for c in SHIPPED}
+    made = {(c, trail): VertiportSim(load_config(c, **TEN, **{"atc.trail_departures": trail}))
+            for c in SHIPPED for trail in (False, True)}
     yield made
     for sim in made.values():
         sim.close()
 
 
 @settings(max_examples=18, deadline=None)
-@given(config=st.sampled_from(SHIPPED), seed=st.integers(0, 2**16),
+@given(config=st.sampled_from(SHIPPED), trail=st.booleans(), seed=st.integers(0, 2**16),
        choices=st.lists(st.integers(0, 10**6), min_size=100, max_size=300))
 def test_random_legal_play_never_loses_separation_on_any_shipped_scenario(
-        shipped_sims, config, seed, choices):
+        shipped_sims, config, trail, seed, choices):
     """Every shipped scenario at 10 % uncertainty (gusts, charger and take-off failures and
     misreads at 0.1, position noise of std 1 m): no two vehicles within the separation, no
-    loss of separation, no contact, after every step (violations() checks all three)."""
-    sim = shipped_sims[config]
+    loss of separation, no contact, after every step (violations() checks all three); with
+    and without trailing departures."""
+    sim = shipped_sims[config, trail]
     sim.reset(np.random.default_rng(seed))
     for c in choices:
         legal = np.flatnonzero(sim.action_mask(sim.acting))
