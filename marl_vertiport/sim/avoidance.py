@@ -27,9 +27,10 @@ class Avoidance:
         the answer is memoised per reservation, not per position."""
         if not self.has_target[v] or self.avoid_layer[v] >= 0:
             return None
-        x, y = self.pos[v, 0], self.pos[v, 1]
-        waypoints = [self.target[v]] + self.routes[v]
-        if not any(math.hypot(w[0] - x, w[1] - y) > 1e-9 for w in waypoints):
+        x, y = self.pos.item(v, 0), self.pos.item(v, 1)
+        t = self.target[v].tolist()
+        if math.hypot(t[0] - x, t[1] - y) <= 1e-9 and not any(
+                math.hypot(w.item(0) - x, w.item(1) - y) > 1e-9 for w in self.routes[v]):
             return -1
         res = self.reservation.tolist()
         layers = self.avoid_layer.tolist()

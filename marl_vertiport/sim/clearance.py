@@ -167,8 +167,9 @@ class Clearance:
         if seg_m <= _EPS:
             self.release_at[v] = None
             return
+        # Also kept: the direction unnormalised and the length, for the release itself.
         self.release_at[v] = (s[0], s[1], s[2], ux / seg_m, uy / seg_m, uz / seg_m,
-                              _QUANTUM_STEPS * self.step_len_m - 1e-6)
+                              _QUANTUM_STEPS * self.step_len_m - 1e-6, ux, uy, uz, seg_m)
 
     def _advance_reservation(self, v: int, p: list[float], t: list[float]) -> None:
         """Release the part of vehicle ``v``'s current segment it has flown: its start moves up
@@ -178,14 +179,10 @@ class Clearance:
         quick = self.release_at[v]
         if quick is None or self.status.item(v) not in _FLYING:
             return
-        sx, sy, sz, ux, uy, uz, first = quick
-        if (p[0] - sx) * ux + (p[1] - sy) * uy + (p[2] - sz) * uz < first:
+        sx, sy, sz, ex, ey, ez, first, ux, uy, uz, seg_m = quick
+        if (p[0] - sx) * ex + (p[1] - sy) * ey + (p[2] - sz) * ez < first:
             return  # not yet a whole quantum flown: nothing to release
         s = quick  # its first three: where the segment began (seg_from), as noted
-        ux, uy, uz = t[0] - s[0], t[1] - s[1], t[2] - s[2]
-        seg_m = math.sqrt(ux * ux + uy * uy + uz * uz)
-        if seg_m <= _EPS:
-            return
         along = ((p[0] - s[0]) * ux + (p[1] - s[1]) * uy + (p[2] - s[2]) * uz) / seg_m
         quantum = _QUANTUM_STEPS * self.step_len_m
         steps = math.floor(along / quantum + 1e-9)

@@ -42,16 +42,12 @@ class Legality:
         cached = self._mask_cache.get(v)
         if cached is not None:
             return cached
-        if self.sep_check:
+        if self.sep_check and self._memo_gen != self._memo.gen:
             self._check_memo()
         s = self.status.item(v)
         mask = self._fixed_masks[s]
         if mask is None and s in _IN_FLIGHT:  # rules v1: avoid only where a layer clears
-            acts = self.actions
-            mask = np.zeros(acts.n, dtype=np.int8)
-            mask[acts.continue_] = 1
-            mask[acts.avoid] = self._avoid_layer(v) is not None
-            mask.setflags(write=False)
+            mask = self._flight_masks[self._avoid_layer(v) is not None]
         elif mask is None:  # on the ground or hovering: the free nodes it may go to
             acts = self.actions
             mask = np.zeros(acts.n, dtype=np.int8)
@@ -94,6 +90,19 @@ class Legality:
         if _NODES <= action < _NODES + self.layout.n_nodes:
             return float(self.energy.hop_pct[node, action - _NODES])
         return 0.0
+
+    def _in_flight_masks(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rules v1: the two read-only masks of a vehicle in flight, ``continue`` alone and
+        ``continue`` or ``avoid`` (index: whether an avoidance layer clears)."""
+        acts = self.actions
+        masks = []
+        for avoid in (False, True):
+            mask = np.zeros(acts.n, dtype=np.int8)
+            mask[acts.continue_] = 1
+            mask[acts.avoid] = avoid
+            mask.setflags(write=False)
+            masks.append(mask)
+        return masks[0], masks[1]
 
     def _status_masks(self) -> tuple[np.ndarray | None, ...]:
         """By status code, the read-only mask of a status whose legal actions do not depend on

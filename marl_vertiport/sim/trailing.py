@@ -37,6 +37,9 @@ class Trailing:
             self.leaders[v] = ()
             return
         status = self.status.tolist()
+        if DEPARTING not in status:
+            self.leaders[v] = ()
+            return
         self.leaders[v] = tuple(
             u for u, r in enumerate(self.reservation.tolist())
             if u != v and r >= 0 and status[u] == DEPARTING and not self._pair_clear(rid, r))
