@@ -86,7 +86,7 @@ class Clearance:
         key = (lay.node_xy_m.tobytes(), lay.node_type.tobytes(), lay.node_z_m.tobytes(),
                lay.destination_xy_m.tobytes(), lay.airspace_radius_m, fl.hover_altitude_m,
                fl.departure_altitude_m, self.arrival_alt_m, self.margin_m, self.clear_h_m,
-               self.clear_v_m, self.park_z_m)
+               self.clear_v_m, self.park_z_m, tuple(fl.avoid_altitudes_m), self.step_len_m)
         memo = self._memo = shared_memo(key) if self.sep_check else VolumeMemo()
         self._memo_gen = memo.gen
         self._volume_ids, self._volumes, self._boxes = memo.volume_ids, memo.volumes, memo.boxes
@@ -350,7 +350,8 @@ class Clearance:
         """Rules v1: the free holding slot nearest to the bearing of vehicle ``v`` (away, at its
         destination) whose point clears every reservation, or -1."""
         taken = set(self.slot_of[self.slot_of >= 0].tolist())
-        here = (self.pos.item(v, 0), self.pos.item(v, 1))
+        # The slots depend on the fleet size, which the shared memo's geometry does not fix.
+        here = (self.pos.item(v, 0), self.pos.item(v, 1), len(self.slot_pos))
         order = self._memo.slot_order.get(here)
         if order is None:
             d = np.hypot(self.slot_pos[:, 0] - here[0], self.slot_pos[:, 1] - here[1])

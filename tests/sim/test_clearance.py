@@ -303,3 +303,29 @@ def test_random_legal_play_never_loses_separation_on_any_shipped_scenario(
         problems = violations(sim, reward)
         assert not problems, problems
     assert sim.metrics.separation_losses == 0 and sim.metrics.contacts == 0
+
+
+def test_simulators_of_one_layout_with_other_fleets_share_the_memos_safely():
+    """The memos are shared by every simulator of one geometry in a process (sim/volumes.py);
+    the fleet size is not part of the geometry (it sets the holding slots), so a day must not
+    depend on the fleets played before it in the process."""
+    from agents.controllers.episode import run_aec_episode
+    from agents.controllers.registry import make_controller
+    from marl_vertiport import vertiport_v1
+    from marl_vertiport.sim import volumes
+
+    def day(fleet: int) -> dict:
+        env = vertiport_v1.env(config="paper", fleet_size=fleet,
+                               **{"schedule.episode_steps": 400})
+        try:
+            return run_aec_episode(env, make_controller("heuristic"), seed=3)
+        finally:
+            env.close()
+
+    volumes._MEMOS.clear()
+    alone = day(2)
+    volumes._MEMOS.clear()
+    day(7)  # seven holding slots on this layout, against five for two vehicles
+    after = day(2)
+    assert after == alone
+    assert alone["completed_trips"] > 0
