@@ -97,10 +97,14 @@ results: $(STAMP)  ## regenerate every shipped result of the shipped policy: doc
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
 
+# One set of make safety: $(call SAFETY_SET,name,probability of gusts, charger and take-off
+# failures; empty: the configs' own).
+SAFETY_SET = $(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 $(if $(2),--set uncertainty.wind_gust_prob=$(2) --set uncertainty.charger_failure_prob=$(2) --set uncertainty.takeoff_failure_prob=$(2)) --out docs/results/safety/$(1) --report docs/results/safety/$(1).md $(RUN_ON)
+
 safety: $(STAMP)  ## every controller but the planner on every shipped layout at 0, 5 and 10 % uncertainty (gusts, charger and take-off failures), 50 test days a cell: losses of separation, contacts, minimum separation (docs/results/safety/; about 15 minutes on an idle 2-core AMD EPYC)
-	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --out docs/results/safety/u00 --report docs/results/safety/u00.md $(RUN_ON)
-	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --set uncertainty.wind_gust_prob=0.05 --set uncertainty.charger_failure_prob=0.05 --set uncertainty.takeoff_failure_prob=0.05 --out docs/results/safety/u05 --report docs/results/safety/u05.md $(RUN_ON)
-	$(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 --set uncertainty.wind_gust_prob=0.1 --set uncertainty.charger_failure_prob=0.1 --set uncertainty.takeoff_failure_prob=0.1 --out docs/results/safety/u10 --report docs/results/safety/u10.md $(RUN_ON)
+	$(call SAFETY_SET,u00,)
+	$(call SAFETY_SET,u05,0.05)
+	$(call SAFETY_SET,u10,0.1)
 
 render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
 	$(CLI) render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif

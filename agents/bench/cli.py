@@ -49,6 +49,7 @@ from agents.bench.report import report
 #: Interleaved replays a side for the separation check's cost (at least; ``--repeats`` if more).
 CHECK_REPEATS = 11
 
+
 def main(argv: list[str] | None = None, prog: str = "python -m agents.bench") -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -75,8 +76,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.bench") ->
     print("benchmarking (each part in turn) ...", file=sys.stderr)
     results["traffic"] = bench_traffic([c for c in args.configs if c in ("paper", "large")] or args.configs[:1],
                                        args.traffic_agents, args.traffic_days, args.repeats)
-    # The check's cost is the ratio of two close rates: 5 replays a side left it 8-13 % from
-    # run to run on one machine; the median of at least 11 moves it under a point.
+    # The check's cost is the ratio of two close rates: with 5 replays a side it ranged over 7
+    # points (8.5-15.6 %) from run to run of one code on one machine, with 11 over about 2.
     results["separation_check"] = bench_separation_check(args.traffic_days,
                                                          max(args.repeats, CHECK_REPEATS))
     results["fleet_sizes"] = bench_fleet_sizes(args.traffic_days, max(1, args.repeats // 2))

@@ -47,16 +47,7 @@ class Avoidance:
             if k in used or alt <= self.leg_alt.item(v):  # a climb, never a descent
                 continue
             lid = self._lifted_id(v, k, alt)
-            clear = True
-            for rid in others:
-                ok = memo.lifted_ok.get((lid, rid))
-                if ok is None:
-                    ok = self._ids_clear(lid, rid)
-                    memo.lifted_ok[(lid, rid)] = ok
-                if not ok:
-                    clear = False
-                    break
-            if clear:
+            if all(self._pair_clear(lid, rid) for rid in others):
                 found = k
                 break
         memo.avoid[key] = found

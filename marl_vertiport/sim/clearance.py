@@ -103,16 +103,9 @@ class Clearance:
     def _trim_memos(self) -> None:
         """Empty the memos when they have grown large (at the start of a day; every simulator
         sharing them names its reservations again before it next uses them)."""
-        memo = self._memo
-        if max(len(memo.volumes), len(memo.hold), len(memo.avoid), len(memo.masks),
-               len(memo.spots)) >= MEMO_MAX:
-            for table in (memo.volume_ids, memo.volumes, memo.boxes, memo.node_ok, memo.trip_ok,
-                          memo.lifted, memo.lifted_ok, memo.pair_ok, memo.avoid, memo.hold,
-                          memo.route_ids, memo.flights, memo.masks, memo.spots,
-                          memo.slot_order, memo.releases):
-                table.clear()
-            memo.gen += 1
-        self._memo_gen = memo.gen
+        if self._memo.size() >= MEMO_MAX:
+            self._memo.clear()
+        self._memo_gen = self._memo.gen
 
     def _intern(self, vol: Volume) -> int:
         """A small int naming ``vol`` (the key of the memos)."""
@@ -141,7 +134,7 @@ class Clearance:
                 self.reservation[v] = -1
                 self.reserved[v] = None
                 return
-            vid = self._route_id(self.slot_pos[slot], ("at",), tuple)
+            vid = self._point_id(self.slot_pos[slot])
         elif self.has_target[v] and s in (TAXIING, DEPARTING, ARRIVING):
             # A leg's volume and its quick release test, memoised by the leg's points.
             s0, t0 = self.seg_from[v].tolist(), self.target[v].tolist()
@@ -154,7 +147,7 @@ class Clearance:
                 self._memo.flights[key] = done
             vid, self.release_at[v] = done
         else:
-            vid = self._route_id(self.pos[v], ("at",), tuple)
+            vid = self._point_id(self.pos[v])
         self.reservation[v] = vid
         self.reserved[v] = self._volumes[vid]
 
@@ -175,14 +168,12 @@ class Clearance:
         """Release the part of vehicle ``v``'s current segment it has flown: its start moves up
         to the last whole two steps of flight (``2 x step_len_m``, so that the volumes of a day
         repeat and their tests are memoised) the vehicle has passed, never back. ``p``: its position,
-        ``t``: its target."""
-        quick = self.release_at[v]
-        if quick is None or self.status.item(v) not in _FLYING:
+        ``t``: its target. Called only once the quick test of ``release_at[v]`` has passed (the
+        motion's loop makes it, :meth:`Motion._process_arrivals`)."""
+        if self.status.item(v) not in _FLYING:
             return
-        sx, sy, sz, ex, ey, ez, first, ux, uy, uz, seg_m = quick
-        if (p[0] - sx) * ex + (p[1] - sy) * ey + (p[2] - sz) * ez < first:
-            return  # not yet a whole quantum flown: nothing to release
-        s = quick  # its first three: where the segment began (seg_from), as noted
+        sx, sy, sz, _, _, _, _, ux, uy, uz, seg_m = self.release_at[v]
+        s = (sx, sy, sz)  # where the segment began (seg_from), as noted
         along = ((p[0] - s[0]) * ux + (p[1] - s[1]) * uy + (p[2] - s[2]) * uz) / seg_m
         quantum = _QUANTUM_STEPS * self.step_len_m
         steps = math.floor(along / quantum + 1e-9)
@@ -211,17 +202,24 @@ class Clearance:
         for v, vol in enumerate(self.reserved):
             self.reservation[v] = -1 if vol is None else self._intern(vol)
 
+    def _others(self, v: int, trail: bool) -> list[tuple[int, int]]:
+        """``(vehicle, reservation id)`` of every reservation a clearance of vehicle ``v`` must
+        clear: all but ``v``'s own, and, with ``trail`` and ``atc.trail_departures``, but those
+        of departing vehicles (a clearance may follow them, :meth:`_note_leaders`)."""
+        res = self.reservation.tolist()
+        if trail and self.trail:
+            status = self.status.tolist()
+            return [(u, rid) for u, rid in enumerate(res)
+                    if u != v and rid >= 0 and status[u] != DEPARTING]
+        return [(u, rid) for u, rid in enumerate(res) if u != v and rid >= 0]
+
     def _blockers(self, vol: Volume, v: int, trail: bool = False) -> list[int]:
-        """The vehicles other than ``v`` whose reservation ``vol`` does not clear (with
-        ``trail`` and ``atc.trail_departures``, departing vehicles excepted: a clearance may
-        follow them, :meth:`_note_leaders`)."""
+        """The vehicles other than ``v`` whose reservation ``vol`` does not clear (of those
+        :meth:`_others` names)."""
         h, vv = self.clear_h_m, self.clear_v_m
         bx = box(vol)
         out = []
-        status = self.status.tolist() if trail and self.trail else None
-        for u, rid in enumerate(self.reservation.tolist()):
-            if u == v or rid < 0 or (status is not None and status[u] == DEPARTING):
-                continue  # a clearance may follow a departure (trail_departures)
+        for u, rid in self._others(v, trail):
             if boxes_apart(bx, self._boxes[rid], h, vv):
                 continue
             if not volumes_clear(vol, self._volumes[rid], h, vv):
@@ -233,13 +231,11 @@ class Clearance:
 
     def _id_clear_of_others(self, vid: int, v: int, trail: bool = False) -> bool:
         """:meth:`_clear_of_others` for the interned volume ``vid`` (memoised per pair)."""
-        status = self.status.tolist() if trail and self.trail else None
-        for u, rid in enumerate(self.reservation.tolist()):
-            if u == v or rid < 0 or (status is not None and status[u] == DEPARTING):
-                continue
-            if not self._pair_clear(vid, rid):
-                return False
-        return True
+        return all(self._pair_clear(vid, rid) for _, rid in self._others(v, trail))
+
+    def _point_id(self, xyz: np.ndarray) -> int:
+        """The interned volume of the point ``xyz`` (a vehicle at rest, a holding slot)."""
+        return self._route_id(xyz, ("at",), tuple)
 
     def _route_id(self, start: np.ndarray, key: tuple, route) -> int:
         """The interned volume of a flight from ``start`` along ``route()`` (a callable, called
@@ -320,10 +316,7 @@ class Clearance:
         nodes = mask[_NODES:_NODES + p]
         check_trip = on_ground and mask[self.actions.takeoff]
         dest = self.dest.item(v)
-        status = self.status.tolist() if self.trail else None
-        # A clearance may follow a departure (trail_departures): its reservation is left out.
-        rids = tuple(rid for u, rid in enumerate(self.reservation.tolist())
-                     if u != v and rid >= 0 and (status is None or status[u] != DEPARTING))
+        rids = tuple(rid for _, rid in self._others(v, trail=True))
         key = (node, dest if on_ground else -1, rids)
         done = self._memo.masks.get(key)
         if done is None:
@@ -345,6 +338,15 @@ class Clearance:
         return (boxes_apart(self._boxes[a], self._boxes[b], h, vv)
                 or volumes_clear(self._volumes[a], self._volumes[b], h, vv))
 
+    def _pair_clear(self, a: int, b: int) -> bool:
+        """:meth:`_ids_clear`, memoised per pair."""
+        key = (a, b) if a < b else (b, a)
+        ok = self._memo.pair_ok.get(key)
+        if ok is None:
+            ok = self._ids_clear(a, b)
+            self._memo.pair_ok[key] = ok
+        return ok
+
     # ---------------------------------------------------------------- arrivals
     def _free_slot(self, v: int) -> int:
         """Rules v1: the free holding slot nearest to the bearing of vehicle ``v`` (away, at its
@@ -359,7 +361,7 @@ class Clearance:
         for k in order:
             if k in taken:
                 continue
-            if self._id_clear_of_others(self._route_id(self.slot_pos[k], ("slot",), tuple), v):
+            if self._id_clear_of_others(self._point_id(self.slot_pos[k]), v):
                 return k
         return -1
 
@@ -367,9 +369,7 @@ class Clearance:
         """Of the free hover spots ``free``, those whose arrival route from vehicle ``v``'s
         position clears every other reservation."""
         pos = self.pos[v]
-        status = self.status.tolist() if self.trail else None
-        rids = tuple(-1 if u == v or (status is not None and status[u] == DEPARTING) else rid
-                     for u, rid in enumerate(self.reservation.tolist()))
+        rids = tuple(rid for _, rid in self._others(v, trail=True))
         spots = free.tolist()
         key = (*pos.tolist(), rids, *spots)
         kept = self._memo.spots.get(key)

@@ -138,9 +138,9 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         self._charging_node_list = self._charging_nodes.tolist()
         self._agent_names = tuple(f"evtol_{i}" for i in range(self.n))
         self._fixed_masks = self._status_masks()
+        self._flight_masks = self._in_flight_masks()
         # By status code: the action of a fixed mask with one legal action, -1 for a fixed mask
         # with several, None where the mask depends on the state.
-        self._flight_masks = self._in_flight_masks()
         self._fixed_single = tuple(
             None if m is None else int(np.flatnonzero(m)[0]) if m.sum() == 1 else -1
             for m in self._fixed_masks)

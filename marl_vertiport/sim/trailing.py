@@ -44,15 +44,6 @@ class Trailing:
             u for u, r in enumerate(self.reservation.tolist())
             if u != v and r >= 0 and status[u] == DEPARTING and not self._pair_clear(rid, r))
 
-    def _pair_clear(self, a: int, b: int) -> bool:
-        """Whether interned volumes ``a`` and ``b`` are clear of each other (memoised)."""
-        key = (a, b) if a < b else (b, a)
-        ok = self._memo.pair_ok.get(key)
-        if ok is None:
-            ok = self._ids_clear(a, b)
-            self._memo.pair_ok[key] = ok
-        return ok
-
     def _must_hold(self, v: int, p: tuple, q: tuple) -> bool:
         """Whether vehicle ``v``, about to fly from ``p`` to ``q`` this step, must hold where it
         is instead: the sweep of the step (with the margin behind ``p``) does not clear the

@@ -103,7 +103,6 @@ class VolumeMemo:
         self.taxi_volumes: dict[int, list[Volume]] = {}
         self.trip_volumes: dict[tuple[int, int], Volume] = {}
         self.lifted: dict[tuple[int, int, bool], int] = {}
-        self.lifted_ok: dict[tuple[int, int], bool] = {}
         self.pair_ok: dict[tuple[int, int], bool] = {}
         self.avoid: dict[tuple, int | None] = {}
         self.hold: dict[tuple, bool] = {}
@@ -114,6 +113,19 @@ class VolumeMemo:
         self.slot_order: dict[tuple, list[int]] = {}
         self.releases: dict[tuple, tuple] = {}
         self.gen = 0
+
+    def _tables(self) -> list[dict | list]:
+        return [t for t in vars(self).values() if isinstance(t, (dict, list))]
+
+    def size(self) -> int:
+        """Entries in the largest table."""
+        return max(len(t) for t in self._tables())
+
+    def clear(self) -> None:
+        """Empty every table and count it in ``gen``."""
+        for table in self._tables():
+            table.clear()
+        self.gen += 1
 
 
 #: The memos by geometry, the most recently used last (a few layouts at a time).
