@@ -76,13 +76,14 @@ class FlightConfig:
     """Altitude of hover spots and of moves between ports and hover spots."""
     transit_altitude_m: float = 8.0
     """Rules v0: altitude of departures to and arrivals from the airspace boundary."""
-    departure_altitude_m: float = 14.0
+    departure_altitude_m: float = 8.0
     """Rules v1: altitude of departures, from the pad's climb to the airspace boundary: above
-    every other flow (a climb or descent at a node reaches 6 m with its margin, arrivals fly at
-    8 m), so a departure's level leg clears all of them (rules v0: the transit altitude)."""
-    arrival_altitude_m: float = 8.0
-    """Rules v1: altitude of arrivals, from the holding slot to above the hover spot (rules v0:
-    the transit altitude)."""
+    the arrivals by at least the vertical clearance (``safety.min_separation_m`` +
+    ``atc.vertical_buffer_m``), so a departure's level leg clears every arrival it passes over
+    (rules v0: the transit altitude)."""
+    arrival_altitude_m: float = 4.0
+    """Rules v1: altitude of arrivals, from the holding slot straight across to the hover spot
+    (at the hover altitude: no descent at the spot; rules v0: the transit altitude)."""
     avoid_altitudes_m: tuple[float, ...] = (12.0, 16.0)
     """Altitude layers used by the "avoid collision" action, lowest free layer first."""
     vehicle_size_m: float = 1.0

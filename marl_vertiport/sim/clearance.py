@@ -279,8 +279,13 @@ class Clearance:
         return [np.array([x, y, alt]), np.array([exit_xy[0], exit_xy[1], alt])]
 
     def _arrival_route(self, start: np.ndarray, node: int) -> list[np.ndarray]:
+        """Waypoints of an arrival to hover spot ``node``: across at the arrival altitude, then
+        down to the spot (no second point where the spot is at that altitude)."""
         nx, ny = self.layout.node_xy_m[node]
-        return [np.array([nx, ny, self.arrival_alt_m]), self._node_pos[node].copy()]
+        spot = self._node_pos[node].copy()
+        if abs(spot[2] - self.arrival_alt_m) <= _EPS:
+            return [spot]
+        return [np.array([nx, ny, self.arrival_alt_m]), spot]
 
     def _node_clearances(self, node: int, rid: int) -> np.ndarray:
         """int8 ``(P,)``: 1 where the move from ``node`` to that node clears reservation ``rid``."""

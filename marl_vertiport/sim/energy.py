@@ -98,7 +98,7 @@ class FlightEnergy:
             for d, dest_xy in enumerate(layout.destination_xy_m):
                 exit_xy = layout.boundary_point(start[:2], dest_xy)
                 entry_xy = layout.boundary_point(np.zeros(2), dest_xy) * (1.0 - 1e-3)
-                route = [(start[0], start[1], alt), (*exit_xy, alt), (*dest_xy, alt), (*entry_xy, back)]
+                route = [(start[0], start[1], alt), (*exit_xy, alt), (*dest_xy, back), (*entry_xy, back)]
                 if spots.size:
                     h = int(spots[np.argmin(np.linalg.norm(layout.node_xy_m[spots] - entry_xy, axis=1))])
                     route += [(*layout.node_xy_m[h], back), node_pos[h]]

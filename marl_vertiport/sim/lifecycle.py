@@ -126,7 +126,11 @@ class Lifecycle:
             self.returning[v] = False
             self.physics.make_absent(v)
             d = lay.destination_xy_m[self.dest[v]]
-            self._set_route(v, [np.array([d[0], d[1], self.pos[v, 2]])], self.pos[v, 2])
+            # Rules v1: out of the airspace, down from the departure layer to the arrival
+            # altitude on the way to the destination (one straight leg), so the way back
+            # starts level; rules v0 fly both at the transit altitude.
+            alt = self.arrival_alt_m if self.sep_check else self.pos[v, 2]
+            self._set_route(v, [np.array([d[0], d[1], alt])], alt)
             return 0
         if s == AWAY and not self.returning[v]:
             self.returning[v] = True
@@ -176,6 +180,9 @@ class Lifecycle:
         route = [np.array([radius * math.cos(here + turn * k / legs),
                            radius * math.sin(here + turn * k / legs), alt])
                  for k in range(1 if legs else 0, legs + 1)]
+        # Back from a destination on the slot's bearing, the first point is where it is.
+        route = [p for p in route if abs(p[0] - x) + abs(p[1] - y) + abs(p[2] - self.pos[v, 2])
+                 > 1e-9]
         return route + [self.slot_pos[slot].copy()]
 
     def _assign_hover_spot(self, v: int) -> None:
@@ -195,9 +202,8 @@ class Lifecycle:
         d = np.linalg.norm(lay.node_xy_m[free] - self.pos[v, :2], axis=1)
         node = int(free[np.argmin(d)])
         self._occupy(v, node)
-        alt = self.cfg.flight.arrival_altitude_m
-        nx, ny = lay.node_xy_m[node]
-        self._set_route(v, [np.array([nx, ny, alt]), self._node_pos[node].copy()], alt)
+        self._set_route(v, self._arrival_route(self.pos[v], node),
+                        self.cfg.flight.arrival_altitude_m)
         self.physics.make_dynamic(v)
 
     def _take_out_of_service(self, v: int) -> None:

@@ -43,7 +43,7 @@ def test_fit_then_learner_drives_a_dagger_day():
     actor = GraphActor(example, {"actor": ["port_nodes", "evtol_nodes", "self"]}, "actor", 1,
                        feature_names("observation"), hidden=16, hidden_dims=[32])
     first = fit_actor(actor, data, 1, 64, 1e-3, 0, lambda *_: None, "bc", regret_cap=50.0)
-    last = fit_actor(actor, data, 40, 64, 1e-3, 0, lambda *_: None, "bc")
+    last = fit_actor(actor, data, 80, 64, 1e-3, 0, lambda *_: None, "bc")
     assert last["cross_entropy"] < first["cross_entropy"] and last["accuracy"] > 0.8
     cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
                                         "model": {"hidden": 16, "hidden_dims": [32]}})
