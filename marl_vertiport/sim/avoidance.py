@@ -11,6 +11,9 @@ import numpy as np
 
 from marl_vertiport.sim.schema import DEPARTING, STATUS_NAMES
 
+#: A memo's answer for a key it has not seen (its answers include ``None``).
+_UNSEEN = object()
+
 
 class Avoidance:
     """The avoidance layer and route of :class:`~marl_vertiport.sim.core.VertiportSim` (a part
@@ -25,21 +28,21 @@ class Avoidance:
         The test uses the vehicle's reservation lifted to the layer (:meth:`_lifted_id`), which
         holds the avoidance route from anywhere the vehicle may be on its current segment, so
         the answer is memoised per reservation, not per position."""
-        if not self.has_target[v] or self.avoid_layer[v] >= 0:
+        layers = self.avoid_layer.tolist()
+        if not self.has_target.item(v) or layers[v] >= 0:
             return None
         x, y = self.pos.item(v, 0), self.pos.item(v, 1)
-        t = self.target[v].tolist()
-        if math.hypot(t[0] - x, t[1] - y) <= 1e-9 and not any(
+        if math.hypot(self.target.item(v, 0) - x, self.target.item(v, 1) - y) <= 1e-9 and not any(
                 math.hypot(w.item(0) - x, w.item(1) - y) > 1e-9 for w in self.routes[v]):
             return -1
         res = self.reservation.tolist()
-        layers = self.avoid_layer.tolist()
-        departing = self.status.item(v) == DEPARTING
         memo = self._memo
         # The answer depends on the reservations and the layers in use only (see above).
-        key = (v, departing, self.leg_alt.item(v), tuple(res), tuple(layers))
-        if key in memo.avoid:
-            return memo.avoid[key]
+        key = (v, self.status.item(v) == DEPARTING, self.leg_alt.item(v), tuple(res),
+               tuple(layers))
+        found = memo.avoid.get(key, _UNSEEN)
+        if found is not _UNSEEN:
+            return found
         used = {k for k in layers if k >= 0}
         others = [rid for u, rid in enumerate(res) if u != v and rid >= 0]
         found = None

@@ -123,6 +123,9 @@ class Clearance:
         if not self.sep_check:
             return
         s = self.status.item(v)
+        on_leg = s in _FLYING and self.has_target.item(v)
+        if not on_leg:
+            self.release_at[v] = None  # nothing to release: not on a leg inside the airspace
         if s == OUT_OF_SERVICE and math.hypot(self.pos[v, 0], self.pos[v, 1]) \
                 >= self.layout.airspace_radius_m:
             self.reservation[v] = -1  # down outside the airspace
@@ -135,10 +138,13 @@ class Clearance:
                 self.reserved[v] = None
                 return
             vid = self._point_id(self.slot_pos[slot])
-        elif self.has_target[v] and s in (TAXIING, DEPARTING, ARRIVING):
+        elif on_leg:
             # A leg's volume and its quick release test, memoised by the leg's points.
             s0, t0 = self.seg_from[v].tolist(), self.target[v].tolist()
-            key = (*s0, *t0, *(c for w in self.routes[v] for c in w.tolist()))
+            points = s0 + t0
+            for w in self.routes[v]:
+                points += w.tolist()
+            key = tuple(points)
             done = self._memo.flights.get(key)
             if done is None:
                 vol = volume(s0, [t0] + self.routes[v], self.margin_m, self.park_z_m)
@@ -213,6 +219,15 @@ class Clearance:
                     if u != v and rid >= 0 and status[u] != DEPARTING]
         return [(u, rid) for u, rid in enumerate(res) if u != v and rid >= 0]
 
+    def _other_rids(self, v: int, trail: bool) -> tuple[int, ...]:
+        """The reservation ids of :meth:`_others`, as a tuple (a memo key)."""
+        res = self.reservation.tolist()
+        if trail and self.trail:
+            status = self.status.tolist()
+            return tuple([rid for u, rid in enumerate(res)
+                          if u != v and rid >= 0 and status[u] != DEPARTING])
+        return tuple([rid for u, rid in enumerate(res) if u != v and rid >= 0])
+
     def _blockers(self, vol: Volume, v: int, trail: bool = False) -> list[int]:
         """The vehicles other than ``v`` whose reservation ``vol`` does not clear (of those
         :meth:`_others` names)."""
@@ -231,7 +246,7 @@ class Clearance:
 
     def _id_clear_of_others(self, vid: int, v: int, trail: bool = False) -> bool:
         """:meth:`_clear_of_others` for the interned volume ``vid`` (memoised per pair)."""
-        return all(self._pair_clear(vid, rid) for _, rid in self._others(v, trail))
+        return all(self._pair_clear(vid, rid) for rid in self._other_rids(v, trail))
 
     def _point_id(self, xyz: np.ndarray) -> int:
         """The interned volume of the point ``xyz`` (a vehicle at rest, a holding slot)."""
@@ -317,25 +332,22 @@ class Clearance:
         """Clear, in ``mask`` (of vehicle ``v`` at rest on a node), the take-off and the node
         moves whose volume does not clear another vehicle's reservation."""
         node = self.node.item(v)
-        p = self.layout.n_nodes
-        nodes = mask[_NODES:_NODES + p]
-        check_trip = on_ground and mask[self.actions.takeoff]
-        dest = self.dest.item(v)
-        rids = tuple(rid for _, rid in self._others(v, trail=True))
-        key = (node, dest if on_ground else -1, rids)
-        done = self._memo.masks.get(key)
-        if done is None:
-            ok = np.ones(p, dtype=np.int8)
+        dest = self.dest.item(v) if on_ground else -1
+        key = (node, dest, self._other_rids(v, trail=True))
+        keep = self._memo.masks.get(key)
+        if keep is None:
+            # A whole mask: 1 where the separation check keeps the action as it is.
+            keep = np.ones(self.actions.n, dtype=np.int8)
+            nodes = keep[_NODES:_NODES + self.layout.n_nodes]
             trip = on_ground
-            for rid in rids:
-                ok &= self._node_clearances(node, rid)
+            for rid in key[2]:
+                nodes &= self._node_clearances(node, rid)
                 trip = trip and self._trip_clearance(node, dest, rid)
-            ok.setflags(write=False)
-            done = (ok, trip)
-            self._memo.masks[key] = done
-        nodes &= done[0]
-        if check_trip and not done[1]:
-            mask[self.actions.takeoff] = 0
+            if not trip:  # a hovering vehicle has no take-off to keep
+                keep[self.actions.takeoff] = 0
+            keep.setflags(write=False)
+            self._memo.masks[key] = keep
+        mask &= keep
 
     def _ids_clear(self, a: int, b: int) -> bool:
         """Whether interned volumes ``a`` and ``b`` are clear of each other."""
@@ -363,10 +375,14 @@ class Clearance:
         if order is None:
             d = np.hypot(self.slot_pos[:, 0] - here[0], self.slot_pos[:, 1] - here[1])
             order = self._memo.slot_order[here] = np.argsort(d, kind="stable").tolist()
+        ids = self._memo.slot_ids.get(here[2])
+        if ids is None:
+            ids = self._memo.slot_ids[here[2]] = [self._point_id(p) for p in self.slot_pos]
+        rids = self._other_rids(v, trail=False)
         for k in order:
             if k in taken:
                 continue
-            if self._id_clear_of_others(self._point_id(self.slot_pos[k]), v):
+            if all(self._pair_clear(ids[k], rid) for rid in rids):
                 return k
         return -1
 
@@ -374,7 +390,7 @@ class Clearance:
         """Of the free hover spots ``free``, those whose arrival route from vehicle ``v``'s
         position clears every other reservation."""
         pos = self.pos[v]
-        rids = tuple(rid for _, rid in self._others(v, trail=True))
+        rids = self._other_rids(v, trail=True)
         spots = free.tolist()
         key = (*pos.tolist(), rids, *spots)
         kept = self._memo.spots.get(key)

@@ -169,9 +169,17 @@ class Lifecycle:
         """Waypoints from vehicle ``v`` outside the airspace to holding slot ``slot``, at the
         arrival altitude: around the airspace (at least 5 % outside its boundary, 30 degrees of
         bearing at most a leg, so no leg cuts inside it), then straight in on the slot's
-        bearing."""
+        bearing. Memoised by where it is and the slot (the arrays are read-only)."""
+        x, y, z = self.pos[v].tolist()
+        key = (x, y, z, slot, len(self.slot_pos))
+        route = self._memo.slot_routes.get(key)
+        if route is None:
+            route = self._memo.slot_routes[key] = self._slot_route(x, y, z, slot)
+        return list(route)
+
+    def _slot_route(self, x: float, y: float, z: float, slot: int) -> tuple[np.ndarray, ...]:
+        """:meth:`_route_to_slot` from ``(x, y, z)``, as read-only arrays."""
         alt = self.arrival_alt_m
-        x, y = float(self.pos[v, 0]), float(self.pos[v, 1])
         radius = max(math.hypot(x, y), 1.05 * self.layout.airspace_radius_m)
         sx, sy = float(self.slot_pos[slot, 0]), float(self.slot_pos[slot, 1])
         here, there = math.atan2(y, x), math.atan2(sy, sx)
@@ -181,9 +189,11 @@ class Lifecycle:
                            radius * math.sin(here + turn * k / legs), alt])
                  for k in range(1 if legs else 0, legs + 1)]
         # Back from a destination on the slot's bearing, the first point is where it is.
-        route = [p for p in route if abs(p[0] - x) + abs(p[1] - y) + abs(p[2] - self.pos[v, 2])
-                 > 1e-9]
-        return route + [self.slot_pos[slot].copy()]
+        route = [p for p in route if abs(p[0] - x) + abs(p[1] - y) + abs(p[2] - z) > 1e-9]
+        route.append(self.slot_pos[slot].copy())
+        for p in route:
+            p.setflags(write=False)
+        return tuple(route)
 
     def _assign_hover_spot(self, v: int) -> None:
         """Send an arriving vehicle to the free hover spot nearest to it, or hold it (rules
@@ -194,8 +204,9 @@ class Lifecycle:
         if self.sep_check and free.size:
             free = self._clear_hover_spots(v, free)
         if free.size == 0:
-            self._holding.add(v)  # holds at the boundary until a spot frees up
-            self._reserve(v)
+            if v not in self._holding:  # holds at the boundary until a spot frees up
+                self._holding.add(v)
+                self._reserve(v)  # where it holds (a holding vehicle does not move)
             return
         self._holding.discard(v)
         self.slot_of[v] = -1

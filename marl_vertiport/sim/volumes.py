@@ -108,9 +108,11 @@ class VolumeMemo:
         self.hold: dict[tuple, bool] = {}
         self.route_ids: dict[tuple, int] = {}
         self.flights: dict[tuple, tuple] = {}
-        self.masks: dict[tuple, tuple] = {}
+        self.masks: dict[tuple, np.ndarray] = {}
         self.spots: dict[tuple, np.ndarray] = {}
         self.slot_order: dict[tuple, list[int]] = {}
+        self.slot_ids: dict[int, list[int]] = {}
+        self.slot_routes: dict[tuple, tuple] = {}
         self.releases: dict[tuple, tuple] = {}
         self.gen = 0
 
