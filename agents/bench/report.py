@@ -203,7 +203,11 @@ def report(results: dict[str, Any]) -> str:
                   f"{check['seed']}, median of {check['repeats']} interleaved replays each): "
                   f"{check['on_steps_per_s']:,.0f} AEC steps/s with the separation check (rules "
                   f"v1), {check['off_steps_per_s']:,.0f} without (rules v0): the check costs "
-                  f"{100 * check['cost']:.1f} % (target: at most 10 %).", ""]
+                  f"{100 * check['cost']:.1f} % (target: at most 10 %)"
+                  + (f"; the cost of one pair of back-to-back replays has quartiles "
+                     f"{100 * check['pair_cost_quartiles'][0]:.1f} % and "
+                     f"{100 * check['pair_cost_quartiles'][1]:.1f} %"
+                     if check.get("pair_cost_quartiles") else "") + ".", ""]
     lines += _target_lines(results)
     lines += _profile_lines(results)
     lines += _fleet_and_planner_lines(results)
