@@ -46,8 +46,8 @@ from agents.bench.planner import bench_planner
 from agents.bench.report import report
 
 
-#: Interleaved replays a side for the separation check's cost (at least; ``--repeats`` if more),
-#: and days of traffic each replays (at least; ``--traffic-days`` if more).
+#: Interleaved replays a side for the separation check's cost, and days of traffic each
+#: replays (the defaults of ``--check-repeats`` and ``--check-days``).
 CHECK_REPEATS = 21
 CHECK_DAYS = 4
 
@@ -60,6 +60,12 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.bench") ->
     parser.add_argument("--configs", nargs="+", default=["paper", "paper_uncertain", "large"])
     parser.add_argument("--traffic-days", type=int, default=2,
                         help="days of each controller's traffic to record and replay (default: 2)")
+    parser.add_argument("--check-days", type=int, default=CHECK_DAYS,
+                        help="days of the dispatcher's traffic the separation check's cost "
+                             f"replays (default: {CHECK_DAYS})")
+    parser.add_argument("--check-repeats", type=int, default=CHECK_REPEATS,
+                        help="interleaved replays a side for the separation check's cost "
+                             f"(default: {CHECK_REPEATS})")
     parser.add_argument("--traffic-agents", nargs="+", default=["heuristic", "fcfs"],
                         help="controllers whose traffic is replayed (default: heuristic fcfs)")
     parser.add_argument("--planner-decisions", type=int, default=1440,
@@ -82,8 +88,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.bench") ->
     # ranged over 7 points (8.5-15.6 %) from run to run of one code on one machine, with 11 over
     # 3 to 4 (7.3-10.5 %); with 21 replays of 4 days four runs gave 7.8-8.0 % (21 of the first
     # 2 days alone: 8.8 and 9.3 %, those two days cost more than the next two).
-    results["separation_check"] = bench_separation_check(max(args.traffic_days, CHECK_DAYS),
-                                                         max(args.repeats, CHECK_REPEATS))
+    results["separation_check"] = bench_separation_check(args.check_days, args.check_repeats)
     results["fleet_sizes"] = bench_fleet_sizes(args.traffic_days, max(1, args.repeats // 2))
     figure = (Path(args.report).with_name("performance_fleet.png") if args.report
               else Path(args.out) / "performance_fleet.png")

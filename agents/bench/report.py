@@ -150,6 +150,11 @@ def _target_lines(results: dict[str, Any]) -> list[str]:
         if r:
             rows.append((f"overhead / engine in steps with motion, `{config}`", "<= 2",
                          f"{r['moving_overhead_ratio']:.2f}", r["moving_overhead_ratio"] <= 2.0))
+    check = results.get("separation_check")
+    if check:
+        rows.append((f"separation check's cost, dispatcher's traffic, `{check['config']}` "
+                      "(rules v1 against v0)", "<= 10 %", f"{100 * check['cost']:.1f} %",
+                      check["cost"] <= 0.10))
     if len(fleet) > 1:
         growth = ((fleet[-1]["us_per_step"] / fleet[0]["us_per_step"])
                   / (fleet[-1]["fleet_size"] / fleet[0]["fleet_size"]))

@@ -9,7 +9,8 @@ from agents.bench import main
 def test_bench_smoke(tmp_path):
     report = tmp_path / "performance.md"
     assert main(["--steps", "200", "--repeats", "2", "--configs", "paper", "large",
-                 "--traffic-days", "1", "--planner-decisions", "5",
+                 "--traffic-days", "1", "--check-days", "1", "--check-repeats", "2",
+                 "--planner-decisions", "5",
                  "--vector-steps", "10", "--copies", "2", "--train-iterations", "1",
                  "--out", str(tmp_path), "--report", str(report)]) == 0
     data = json.loads((tmp_path / "bench.json").read_text())
@@ -26,6 +27,11 @@ def test_bench_smoke(tmp_path):
         assert row["steps"] > 0 and row["days"] == 1
         assert row["steps_per_s_min"] <= row["steps_per_s_median"] <= row["steps_per_s_max"]
         assert row["engine_alone_us_per_step"] > 0 and 0 < row["moving_fraction"] <= 1
+    check = data["separation_check"]
+    assert check["days"] == 1 and check["repeats"] == 2
+    assert check["on_steps_per_s"] > 0 and check["off_steps_per_s"] > 0
+    low, high = check["pair_cost_quartiles"]
+    assert low <= high and abs(check["cost"]) < 1
     assert [r["fleet_size"] for r in data["fleet_sizes"]] == [4, 8, 16, 32]
     assert all(r["us_per_step"] > 0 and r["steps"] > 0 for r in data["fleet_sizes"])
     assert (tmp_path / "performance_fleet.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -48,7 +54,8 @@ def test_bench_smoke(tmp_path):
     assert "Where a step's time goes (cProfile, AEC API, `paper`, the dispatcher's traffic" in text
     assert "The floor under that ratio" in text and "Against the targets" in text
     for measure in ("AEC steps/s, dispatcher's traffic, `paper`", "overhead / engine in steps "
-                    "with motion, `large`", "cost per step, 4 to 32 eVTOLs"):
+                    "with motion, `large`", "cost per step, 4 to 32 eVTOLs",
+                    "separation check's cost, dispatcher's traffic, `paper`"):
         assert measure in text
 
 
