@@ -16,8 +16,13 @@ bootstrap_ci`, resampling days)::
 Each ``--pair BASE CANDIDATE`` gives a row; with several pairs (one per training seed, say) a
 last row pools all their days. Beside the reward each row gives what the reward can hide: the
 vehicles lost in the air and on the ground and the unresolved conflicts (the paper's S = -5,
-counted as collisions) a day, base → candidate, and the mean difference per case. The table
-goes to stdout (Markdown); ``--csv`` also writes it. Exit codes: 0 done, 2 bad input (a
+counted as collisions) a day, base → candidate, and the mean difference per case.
+
+*Unforced losses* say which of those losses a controller could have avoided: on each day, the
+vehicles it lost beyond the fewest any agent of a reference set lost on that day
+(``--reference``; by default the dispatcher and the look-ahead planner, those of them the files
+hold), averaged over the days a reference agent played. The table goes to stdout (Markdown);
+``--csv`` also writes it. Exit codes: 0 done, 2 bad input (a
 missing or foreign file, an agent not in the files, no day in common).
 """
 
@@ -37,6 +42,9 @@ from agents.evaluate.stats import bootstrap_ci
 #: Columns of ``episodes.csv`` this comparison reads.
 NEEDED = ("agent", "config", "seed", "total_reward", "stranded_air", "stranded_ground", "collisions")
 Day = tuple[str, int]  # (case, seed)
+#: The reference set of unforced losses when ``--reference`` is not given: those of these
+#: agents the files hold (the dispatcher and the look-ahead planner).
+DEFAULT_REFERENCE = ("heuristic", "rollout")
 
 
 class PairedInputError(ValueError):
@@ -76,12 +84,35 @@ def read_episodes(paths: Sequence[str | Path]) -> dict[str, dict[Day, dict[str, 
     return out
 
 
+def unforced_losses(episodes: dict[str, dict[Day, dict[str, float]]], agent: str, day: Day,
+                    reference: Sequence[str]) -> float | None:
+    """``agent``'s *unforced* losses on ``day``: the vehicles it lost beyond the fewest any
+    agent of ``reference`` lost on that day, ``max(0, lost(agent) - min_r lost(r))``; ``None``
+    when no reference agent played the day. A loss every reference agent also suffers is
+    forced by the day (its traffic, its failures), not by the controller."""
+    best = [_lost(episodes[r][day]) for r in reference if day in episodes.get(r, {})]
+    if not best:
+        return None
+    return max(0.0, _lost(episodes[agent][day]) - min(best))
+
+
+def _lost(values: dict[str, float]) -> float:
+    return values["stranded_air"] + values["stranded_ground"]
+
+
 def compare(episodes: dict[str, dict[Day, dict[str, float]]],
-            pairs: Sequence[tuple[str, str]]) -> list[dict[str, Any]]:
+            pairs: Sequence[tuple[str, str]],
+            reference: Sequence[str] = ()) -> list[dict[str, Any]]:
     """One row per pair (and a pooled row ``"all"`` for several pairs): the days both agents
     played, each one's mean reward, the mean paired difference with its 95 % bootstrap CI,
     lost vehicles (air, ground) and unresolved conflicts a day of each, and the mean
-    difference per case (``by_case``)."""
+    difference per case (``by_case``). With a ``reference`` set of agents, also each side's
+    unforced losses a day (:func:`unforced_losses`) over the days a reference agent played
+    (``reference_days``; ``None`` where there is none)."""
+    for agent in reference:
+        if agent not in episodes:
+            raise PairedInputError(f"reference agent {agent!r} is in none of the files (they "
+                                   f"hold: {', '.join(sorted(episodes)) or 'no episodes'})")
     rows, pooled = [], []
     for base, cand in pairs:
         for agent in (base, cand):
@@ -91,17 +122,28 @@ def compare(episodes: dict[str, dict[Day, dict[str, float]]],
         days = sorted(set(episodes[base]) & set(episodes[cand]))
         if not days:
             raise PairedInputError(f"{base} and {cand} played no day in common")
-        pooled += [(episodes[base][d], episodes[cand][d], d) for d in days]
-        rows.append(_row(f"{base} → {cand}", [(episodes[base][d], episodes[cand][d], d)
-                                              for d in days]))
+        pooled += [(base, cand, d) for d in days]
+        rows.append(_row(f"{base} → {cand}", [(base, cand, d) for d in days], episodes,
+                         reference))
     if len(pairs) > 1:
-        rows.append(_row("all", pooled))
+        rows.append(_row("all", pooled, episodes, reference))
     return rows
 
 
-def _row(label: str, days: list[tuple[dict[str, float], dict[str, float], Day]]) -> dict[str, Any]:
+def _row(label: str, played: list[tuple[str, str, Day]],
+         episodes: dict[str, dict[Day, dict[str, float]]], reference: Sequence[str]
+         ) -> dict[str, Any]:
+    """A row of :func:`compare` over ``played``: ``(base agent, candidate agent, day)``."""
+    days = [(episodes[b][d], episodes[c][d], d) for b, c, d in played]
+
     def mean(side: int, key: str) -> float:
         return float(np.mean([d[side][key] for d in days]))
+
+    unforced: list[tuple[float, float]] = []
+    for b, c, d in played:
+        ub, uc = (unforced_losses(episodes, a, d, reference) for a in (b, c))
+        if ub is not None and uc is not None:
+            unforced.append((ub, uc))
 
     diff = np.array([c["total_reward"] - b["total_reward"] for b, c, _ in days])
     low, high = bootstrap_ci(diff)
@@ -113,21 +155,29 @@ def _row(label: str, days: list[tuple[dict[str, float], dict[str, float], Day]])
             "ci_low": low, "ci_high": high,
             **{f"{key}_{side}": mean(i, key) for i, side in enumerate(("base", "candidate"))
                for key in ("stranded_air", "stranded_ground", "collisions")},
+            "reference_days": len(unforced),
+            "unforced_base": float(np.mean([u[0] for u in unforced])) if unforced else None,
+            "unforced_candidate": float(np.mean([u[1] for u in unforced])) if unforced else None,
             "by_case": by_case}
 
 
-def markdown(rows: list[dict[str, Any]]) -> str:
+def markdown(rows: list[dict[str, Any]], reference: Sequence[str] = ()) -> str:
     cases = sorted({c for r in rows for c in r["by_case"]})
+    named = ", ".join(reference) or "none given"
     head = ["pair", "days", "base", "candidate", "paired difference [95 % CI]",
-            "lost air / ground a day, base → candidate", "unresolved conflicts (S = -5)",
+            "lost air / ground a day, base → candidate",
+            f"unforced losses a day (reference: {named})", "unresolved conflicts (S = -5)",
             *(f"`{c}`" for c in cases)]
-    lines = ["| " + " | ".join(head) + " |", "|---|" + "---:|" * 4 + "---|---|" + "---:|" * len(cases)]
+    lines = ["| " + " | ".join(head) + " |",
+             "|---|" + "---:|" * 4 + "---|---|---|" + "---:|" * len(cases)]
     for r in rows:
+        unforced = (f"{r['unforced_base']:.2f} → {r['unforced_candidate']:.2f} "
+                    f"({r['reference_days']} days)" if r["reference_days"] else "–")
         cells = [r["pair"], str(r["days"]), f"{r['base']:.0f}", f"{r['candidate']:.0f}",
                  f"{r['difference']:+.0f} [{r['ci_low']:+.0f}, {r['ci_high']:+.0f}]",
                  f"{r['stranded_air_base']:.2f} / {r['stranded_ground_base']:.2f} → "
                  f"{r['stranded_air_candidate']:.2f} / {r['stranded_ground_candidate']:.2f}",
-                 f"{r['collisions_base']:.2f} → {r['collisions_candidate']:.2f}",
+                 unforced, f"{r['collisions_base']:.2f} → {r['collisions_candidate']:.2f}",
                  *(f"{r['by_case'][c]:+.0f}" if c in r["by_case"] else "" for c in cases)]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -153,14 +203,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pair", nargs=2, action="append", required=True,
                         metavar=("BASE", "CANDIDATE"), help="agents to compare, as named in the "
                         "files; repeat for several pairs (a pooled row is added)")
+    parser.add_argument("--reference", nargs="+", metavar="AGENT",
+                        help="the reference set of unforced losses (default: those of "
+                             f"{', '.join(DEFAULT_REFERENCE)} the files hold)")
     parser.add_argument("--csv", help="also write the table here")
     args = parser.parse_args(argv)
     try:
-        rows = compare(read_episodes(args.episodes), [tuple(p) for p in args.pair])
+        episodes = read_episodes(args.episodes)
+        reference = (args.reference if args.reference is not None
+                     else [a for a in DEFAULT_REFERENCE if a in episodes])
+        rows = compare(episodes, [tuple(p) for p in args.pair], reference)
     except PairedInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(markdown(rows), end="")
+    print(markdown(rows, reference), end="")
     if args.csv:
         write_atomic(Path(args.csv), csv_text(rows).encode())
     return 0

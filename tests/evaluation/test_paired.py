@@ -74,3 +74,32 @@ def test_bad_files_are_named(tmp_path, capsys):
         read_episodes([episodes(tmp_path), other])
     assert main([str(tmp_path / "missing.csv"), "--pair", "a", "b"]) == 2
     assert "missing.csv: cannot be read" in capsys.readouterr().err
+
+
+def test_unforced_losses_count_what_no_reference_agent_also_lost(tmp_path):
+    rows = []
+    for k, seed in enumerate(range(800000, 800004)):
+        rows.append(["heuristic", "paper", k, seed, 1000.0, 0, 1, 0])  # loses 1 every day
+        rows.append(["rollout", "paper", k, seed, 1100.0, 0, k % 2, 0])  # 0 on even days
+        rows.append(["x", "paper", k, seed, 900.0, 1, 1, 0])  # loses 2 every day
+    data = read_episodes([write(tmp_path / "ref.csv", rows)])
+    row, = compare(data, [("heuristic", "x")], reference=("heuristic", "rollout"))
+    # The fewest lost by a reference agent: 0, 1, 0, 1; x loses 2: 2, 1, 2, 1.
+    assert row["reference_days"] == 4
+    assert row["unforced_base"] == pytest.approx(0.5) and row["unforced_candidate"] == 1.5
+    row, = compare(data, [("heuristic", "x")])  # no reference set
+    assert row["reference_days"] == 0 and row["unforced_candidate"] is None
+    with pytest.raises(PairedInputError, match="reference agent 'planner' is in none"):
+        compare(data, [("heuristic", "x")], reference=("planner",))
+
+
+def test_cli_takes_the_reference_agents_the_files_hold(tmp_path, capsys):
+    path = episodes(tmp_path)  # agents a, b, c: neither reference agent by default
+    assert main([str(path), "--pair", "a", "b"]) == 0
+    assert "(reference: none given)" in capsys.readouterr().out
+    assert main([str(path), "--pair", "a", "b", "--reference", "a"]) == 0
+    table = capsys.readouterr().out
+    # b loses one more on the ground on wide (4 of the 8 days): 0.50 a day beyond a.
+    assert "(reference: a)" in table and "0.00 → 0.50 (8 days)" in table
+    assert main([str(path), "--pair", "a", "b", "--reference", "zz"]) == 2
+    assert "reference agent 'zz'" in capsys.readouterr().err
