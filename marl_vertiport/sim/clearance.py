@@ -221,12 +221,7 @@ class Clearance:
 
     def _other_rids(self, v: int, trail: bool) -> tuple[int, ...]:
         """The reservation ids of :meth:`_others`, as a tuple (a memo key)."""
-        res = self.reservation.tolist()
-        if trail and self.trail:
-            status = self.status.tolist()
-            return tuple([rid for u, rid in enumerate(res)
-                          if u != v and rid >= 0 and status[u] != DEPARTING])
-        return tuple([rid for u, rid in enumerate(res) if u != v and rid >= 0])
+        return tuple([rid for _, rid in self._others(v, trail)])
 
     def _blockers(self, vol: Volume, v: int, trail: bool = False) -> list[int]:
         """The vehicles other than ``v`` whose reservation ``vol`` does not clear (of those

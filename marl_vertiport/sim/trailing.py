@@ -10,8 +10,8 @@ vehicle yields only to clearances older than its own, so no two vehicles wait fo
 and every wait ends when the departure ahead has gone (every other reservation the follower's
 clearance had to clear, :meth:`Clearance._apply_separation_check`).
 
-Why it is there: a departure holds the column over its pad for the 7 steps of its climb and
-its outbound leg until it leaves; with whole-leg reservations alone the pad it left and every
+Why it is there: a departure holds the column over its pad through its climb and its
+outbound leg until it leaves; with whole-leg reservations alone the pad it left and every
 way across its path stay closed that long (docs/environment.md, section 7.4).
 """
 
