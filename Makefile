@@ -23,7 +23,7 @@ SEEDS    ?= 3
 ITERATIONS ?=
 # The layouts `make safety` plays (paper_uncertain and paper_uncertain_10 are paper with
 # uncertainty, which it sets itself).
-SAFETY_LAYOUTS ?= paper small twin wide mid large fleet40
+SAFETY_LAYOUTS ?= paper small twin wide mid large fleet40_overloaded
 
 # Where `evaluate`, `sweep` and `train` run their tasks: BACKEND=ray (Ray reads RAY_ADDRESS,
 # e.g. RAY_ADDRESS=auto to join a cluster started with `ray start --head`; docs/scaling.md).

@@ -210,7 +210,7 @@ def bench_traffic(configs: list[str], agents: list[str], days: int, repeats: int
 #: Layouts for the cost against fleet size: (label, config, overrides).
 FLEET_SIZES = (("4 eVTOLs (paper)", "paper", {}), ("8 eVTOLs (wide)", "wide", {}),
                ("16 eVTOLs (large)", "large", {}),
-               ("32 eVTOLs (fleet40 layout)", "fleet40", {"fleet_size": 32}))
+               ("32 eVTOLs (fleet40_overloaded layout)", "fleet40_overloaded", {"fleet_size": 32}))
 
 
 def bench_separation_check(days: int, repeats: int, config: str = "paper",

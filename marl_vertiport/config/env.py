@@ -119,7 +119,13 @@ class BatteryConfig:
     initial_pct: float = 100.0
     """Charge of every vehicle at the start of an episode."""
     cruise_drain_pct_per_m: float = 0.5
-    """Drain per metre flown when cruising."""
+    """Drain per metre flown when cruising (the paper's eq. 1), before ``cruise_drain_scale``."""
+    cruise_drain_scale: float = 0.25
+    """Rules v1: the fraction of each metre flown that the cruise drain charges, so that an
+    operation costs the battery what it costs in the paper's code, whose destinations lie 8-11 m
+    away: a round trip here, take-off to a hover spot, covers about four times the distance
+    (``docs/environment.md``, section 8). Rules v0: 1 (so is it in the ``paper_overloaded``
+    stress scenario)."""
     hover_drain_pct: float = 2.0
     """Drain of an airborne vehicle that moved less than ``min_cruise_distance_m``."""
     ground_idle_drain_pct: float = 4.0
@@ -365,8 +371,8 @@ def _validate(cfg: EnvConfig) -> None:
     _check(sc.on_time_tolerance_min >= 0, "schedule.on_time_tolerance_min", "must be >= 0")
 
     _check(0 <= bat.initial_pct <= 100, "battery.initial_pct", "must lie in [0, 100]")
-    for name in ("cruise_drain_pct_per_m", "hover_drain_pct", "ground_idle_drain_pct",
-                 "charge_pct", "min_cruise_distance_m"):
+    for name in ("cruise_drain_pct_per_m", "cruise_drain_scale", "hover_drain_pct",
+                 "ground_idle_drain_pct", "charge_pct", "min_cruise_distance_m"):
         _check(getattr(bat, name) >= 0, f"battery.{name}", "must be >= 0")
 
     for name in ("takeoff_weight", "landing_weight", "battery_weight", "delay_weight",

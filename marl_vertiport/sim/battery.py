@@ -1,7 +1,8 @@
 """The paper's battery model (eq. 1 and section II-A), per step of ``minutes_per_step``:
 
 * in the air, cruising (moved at least ``min_cruise_distance_m`` in the step):
-  ``-cruise_drain_pct_per_m * s`` for the 3-D distance ``s`` flown (0.5 %/m);
+  ``-cruise_drain_pct_per_m * cruise_drain_scale * s`` for the 3-D distance ``s`` flown
+  (0.5 %/m times 0.25 under rules v1, times 1 under v0);
 * in the air otherwise (hovering, holding, a short final bit of a leg): ``-hover_drain_pct``
   (2 %);
 * idling on a normal port, or on a charging port whose charger failed this step:
@@ -39,6 +40,8 @@ class BatteryModel:
         rate[on_charger] = battery.charge_pct
         #: Change per step by status code, before the distance flown is known.
         self.rate_pct = tuple(rate)
+        #: Drain per metre flown when cruising.
+        self.cruise_pct_per_m = battery.cruise_drain_pct_per_m * battery.cruise_drain_scale
 
     def changes(self, status_during: Sequence[int], moved: Iterable[tuple[int, float]],
                 failed_charging: Iterable[int] = ()) -> list[float]:
@@ -50,11 +53,11 @@ class BatteryModel:
             failed_charging: vehicles on a charging port whose charger failed this step.
         """
         cfg = self.cfg
-        rate = self.rate_pct
+        rate, per_m = self.rate_pct, self.cruise_pct_per_m
         change = [rate[s] for s in status_during]
         for v, dist in moved:
             if dist >= cfg.min_cruise_distance_m:
-                change[v] = -cfg.cruise_drain_pct_per_m * dist
+                change[v] = -per_m * dist
         for v in failed_charging:
             change[v] = -cfg.ground_idle_drain_pct
         return change

@@ -2,7 +2,8 @@
 
 A vehicle flies each leg of a route straight toward the leg's end at ``step_len_m`` per step and
 stops there: the rest of that step is not carried over to the next leg. A step in which it moves
-at least ``min_cruise_distance_m`` costs ``cruise_drain_pct_per_m`` per metre moved; a shorter
+at least ``min_cruise_distance_m`` costs ``cruise_drain_pct_per_m * cruise_drain_scale`` per metre
+moved; a shorter
 step costs ``hover_drain_pct``. These functions add that up for a route without gusts, which is
 what the ATC's energy check (``atc.energy_check``) and the stranded-vehicle metric compare a
 battery against. A flight whose whole route costs ``E`` is finished with battery ``b`` if
@@ -30,10 +31,28 @@ def leg_energy_pct(length_m: float, step_len_m: float, battery: BatteryConfig) -
 
     def cost(moved_m: float) -> float:
         if moved_m >= battery.min_cruise_distance_m:
-            return battery.cruise_drain_pct_per_m * moved_m
+            return battery.cruise_drain_pct_per_m * battery.cruise_drain_scale * moved_m
         return battery.hover_drain_pct
 
     return (steps - 1) * cost(step_len_m) + cost(last_m)
+
+
+def leg_steps(length_m: float, step_len_m: float) -> int:
+    """Steps to fly one straight leg of ``length_m`` metres (a vehicle stops at a leg's end)."""
+    if length_m <= 1e-9:
+        return 0
+    return max(math.ceil(length_m / step_len_m - 1e-9), 1)
+
+
+def route_steps(start: Sequence[float], waypoints: Sequence[Sequence[float]],
+                step_len_m: float) -> int:
+    """Steps to fly from ``start`` through ``waypoints`` (each ``(x, y, z)`` metres)."""
+    total, here = 0, np.asarray(start, dtype=float)
+    for w in waypoints:
+        w = np.asarray(w, dtype=float)
+        total += leg_steps(length(w - here), step_len_m)
+        here = w
+    return total
 
 
 def route_energy_pct(start: Sequence[float], waypoints: Sequence[Sequence[float]],
@@ -75,6 +94,7 @@ class FlightEnergy:
             slot, which the reserve covers), to the hover spot nearest to the re-entry point, and the
             landing on the charging port nearest to that spot (straight from the boundary to the
             nearest charging port in a layout without hover spots).
+        trip_steps: ``(ports, D)``: the steps of flight of that trip, without gusts.
     """
 
     def __init__(self, cfg: EnvConfig, layout: Layout) -> None:
@@ -93,6 +113,7 @@ class FlightEnergy:
         spots = np.flatnonzero(layout.node_type == HOVER_SPOT)
         alt, back = fl.departure_altitude_m, fl.arrival_altitude_m
         trip = np.zeros((layout.n_ports, len(layout.destination_xy_m)))
+        trip_steps = np.zeros(trip.shape, dtype=int)
         for i in range(layout.n_ports):
             start = node_pos[i]
             for d, dest_xy in enumerate(layout.destination_xy_m):
@@ -102,11 +123,18 @@ class FlightEnergy:
                 if spots.size:
                     h = int(spots[np.argmin(np.linalg.norm(layout.node_xy_m[spots] - entry_xy, axis=1))])
                     route += [(*layout.node_xy_m[h], back), node_pos[h]]
-                    land = min(self.hop_pct[h, c] for c in chargers)
+                    c = min(chargers, key=lambda c: self.hop_pct[h, c])
+                    land = self.hop_pct[h, c]
+                    land_steps = route_steps(node_pos[h], local_route(node_pos[h], node_pos[c], hover_alt),
+                                            step)
                 else:
                     here = np.array([*entry_xy, back])
-                    land = min(cost(here, c) for c in chargers)
+                    c = min(chargers, key=lambda c: cost(here, c))
+                    land = cost(here, c)
+                    land_steps = route_steps(here, local_route(here, node_pos[c], hover_alt), step)
                 trip[i, d] = route_energy_pct(start, route, step, bat) + land
+                trip_steps[i, d] = route_steps(start, route, step) + land_steps
         self.trip_pct = trip
-        for arr in (self.hop_pct, self.trip_pct):
+        self.trip_steps = trip_steps
+        for arr in (self.hop_pct, self.trip_pct, self.trip_steps):
             arr.setflags(write=False)

@@ -59,8 +59,13 @@ class TestBattery:
         status = [Status.TAXIING, Status.HOVERING, Status.ON_CHARGER, Status.ON_CHARGER, Status.ON_PORT]
         change = self.model.changes([int(s) for s in status], [(0, 2.0), (1, 0.5)],
                                     failed_charging=[3])
-        assert change == [-1.0, -2.0, 10.0, -4.0, -4.0]  # 0.5 %/m x 2 m; 0.5 m is hovering
-        assert self.model.apply([0.5, 50.0, 95.0, 3.0, 2.0], change) == [0.0, 48.0, 100.0, 0.0, 0.0]
+        # 0.5 %/m x 0.25 (rules v1's calibration) x 2 m; 0.5 m is hovering
+        assert change == [-0.25, -2.0, 10.0, -4.0, -4.0]
+        assert self.model.apply([0.2, 50.0, 95.0, 3.0, 2.0], change) == [0.0, 48.0, 100.0, 0.0, 0.0]
+
+    def test_rules_v0_charge_the_papers_full_drain(self):
+        v0 = BatteryModel(BatteryConfig(cruise_drain_scale=1.0), AIRBORNE, ON_PORT, ON_CHARGER)
+        assert v0.changes([int(Status.TAXIING)], [(0, 2.0)]) == [-1.0]  # 0.5 %/m x 2 m
 
 
 class TestSchedule:
