@@ -90,7 +90,9 @@ class DispatcherController(Controller):
                  hover_drain_pct_per_min: float = 2.0, cruise_drain_pct_per_m: float = 0.5,
                  hover_altitude_m: float = 4.0, energy_reserve_pct: float = 5.0,
                  holding: bool = True, priority_margin_pct: float = 5.0,
-                 port_clearance_m: float = 4.0) -> None:
+                 port_clearance_m: float = 4.0, return_wait_turns: float = 2.0,
+                 release_margin_pct: float = 40.0, danger_turns: float = 2.0,
+                 ground_idle_drain_pct_per_min: float = 4.0) -> None:
         self.trip_battery_pct = trip_battery_pct
         self.hop_battery_pct = hop_battery_pct
         self.early_release_battery_pct = early_release_battery_pct
@@ -102,7 +104,29 @@ class DispatcherController(Controller):
         self.holding = holding
         self.priority_margin_pct = priority_margin_pct
         self.port_clearance_m = port_clearance_m
+        self.return_wait_turns = return_wait_turns
+        self.release_margin_pct = release_margin_pct
+        self.danger_turns = danger_turns
+        self.ground_idle_drain_pct_per_min = ground_idle_drain_pct_per_min
         self._holding_memo: dict[tuple, int | None] = {}
+        #: Per port, the charge a take-off from it needs (``None`` until :meth:`bind`).
+        self._takeoff_need_pct: np.ndarray | None = None
+
+    def bind(self, sim) -> None:
+        """Adopt the energy model of the env whose simulator is ``sim``: its drains, its
+        reserve, and per port the charge a take-off needs, the dearest trip from that port
+        (``sim.energy.trip_pct``), the reserve, and ``return_wait_turns`` turns of hovering
+        on return (a wait for a charger). An operator knows the fleet's energy model; the
+        decisions still read only the observation. Unbound, the constructor's constants hold
+        (the paper's drains, take-off at ``trip_battery_pct``)."""
+        bat = sim.cfg.battery
+        self.cruise_drain_pct_per_m = bat.cruise_drain_pct_per_m * bat.cruise_drain_scale
+        self.hover_drain_pct_per_min = bat.hover_drain_pct
+        self.ground_idle_drain_pct_per_min = bat.ground_idle_drain_pct
+        self.energy_reserve_pct = sim.cfg.atc.energy_reserve_pct
+        wait = self.return_wait_turns * sim.n * bat.hover_drain_pct
+        need = sim.energy.trip_pct.max(axis=1) + self.energy_reserve_pct + wait
+        self._takeoff_need_pct = np.minimum(need, self.trip_battery_pct)
 
     def act(self, observation: dict) -> int:
         obs = Observation(observation)
@@ -142,7 +166,7 @@ class DispatcherController(Controller):
         battery = obs.fleet("battery_pct")
         others = np.arange(len(status)) != obs.me
         waiting = others & (self._waiting_aloft(obs) | (status == ARRIVING)
-                            | ((status == ON_PORT) & (battery < self.trip_battery_pct)))
+                            | ((status == ON_PORT) & (battery < self._fleet_need(obs))))
         return int(waiting.sum()) > obs.free_nodes(CHARGING_PORT).size
 
     def _nearest(self, obs: Observation, nodes: np.ndarray) -> int | None:
@@ -172,21 +196,68 @@ class DispatcherController(Controller):
         late = to_go < -self.tol
         last_chance = to_go - self._turn_gap(obs) < -self.tol  # next turn falls after the window
         # A take-off the mask clears (with the energy check: one the battery can finish).
-        can_fly = battery >= self.trip_battery_pct and bool(obs.mask[obs.takeoff])
+        need = self._takeoff_need(obs)
+        can_fly = battery >= need and bool(obs.mask[obs.takeoff])
         if status == ON_CHARGER:
             wanted = self._charger_wanted(obs)
             if can_fly and (late or in_window and (battery >= 99.0 or last_chance or wanted)):
                 return obs.takeoff
-            if can_fly and wanted and battery >= self.early_release_battery_pct:
+            if can_fly and wanted and battery >= self._release_pct(need):
                 return obs.takeoff  # early, but the charger is what keeps the fleet flying
+            if can_fly and self._takeoff_need_pct is not None and self._in_danger(obs).any():
+                return obs.takeoff  # another vehicle runs out before it would get the charger
             return obs.stay
         # On a normal port: idling costs 4 %/min, so leave as soon as that is sensible.
         if can_fly and to_go <= self.tol:
             return obs.takeoff
         charger = self._nearest(obs, obs.reachable_nodes(CHARGING_PORT))
-        if charger is not None and battery >= self.hop_battery_pct:
-            return obs.go_to(charger)
+        if charger is not None and (battery >= self.hop_battery_pct or self._takeoff_need_pct is not None):
+            danger = self._in_danger(obs)
+            if not (danger.sum() >= obs.free_nodes(CHARGING_PORT).size
+                    and (obs.fleet("battery_pct")[danger] < battery).all()):
+                return obs.go_to(charger)  # unless needier vehicles run out without it
+        # Idling to the window would leave too little for the trip: leave early (early beats
+        # stranded on the pad).
+        if can_fly and battery - self.ground_idle_drain_pct_per_min * (
+                to_go - self.tol + self._turn_gap(obs)) < need:
+            return obs.takeoff
         return obs.stay
+
+    def _in_danger(self, obs: Observation) -> np.ndarray:
+        """Per other vehicle, whether it waits for a charging port (aloft, arriving, or idling
+        on a normal port short of charge for a take-off) and would run out within
+        ``danger_turns`` turns at its drain (hovering or idling), less the reserve, ``(N,)``."""
+        status = obs.fleet("status").astype(int)
+        battery = obs.fleet("battery_pct")
+        others = np.arange(len(status)) != obs.me
+        aloft = self._waiting_aloft(obs) | (status == ARRIVING)
+        grounded = (status == ON_PORT) & (battery < self._fleet_need(obs))
+        minutes = self.danger_turns * self._turn_gap(obs)
+        left = battery - self.energy_reserve_pct - minutes * np.where(
+            grounded, self.ground_idle_drain_pct_per_min, self.hover_drain_pct_per_min)
+        return others & (aloft | grounded) & (left < 0.0)
+
+    def _release_pct(self, need: float) -> float:
+        """Charge at which a vehicle on a charging port that another vehicle wants takes off
+        early."""
+        if self._takeoff_need_pct is None:
+            return self.early_release_battery_pct
+        return min(self.early_release_battery_pct, need + self.release_margin_pct)
+
+    def _fleet_need(self, obs: Observation) -> np.ndarray:
+        """Per vehicle, the charge it needs to take off from the port it is on, ``(N,)``."""
+        if self._takeoff_need_pct is None:
+            return np.full(len(obs.fleet("node")), self.trip_battery_pct)
+        node = obs.fleet("node").astype(int)
+        ports = len(self._takeoff_need_pct)
+        return np.where((node >= 0) & (node < ports),
+                        self._takeoff_need_pct[np.clip(node, 0, ports - 1)], self.trip_battery_pct)
+
+    def _takeoff_need(self, obs: Observation) -> float:
+        """Charge (percent) the acting vehicle needs to take off from its port."""
+        if self._takeoff_need_pct is None:
+            return self.trip_battery_pct
+        return float(self._takeoff_need_pct[int(obs.mine("node"))])
 
     def _hovering(self, obs: Observation) -> int:
         chargers = obs.reachable_nodes(CHARGING_PORT)

@@ -108,6 +108,8 @@ class RolloutPlanner(Controller):
                 self._scratch.close()
             self._scratch = VertiportSim(cfg)
             self._builder = ObservationBuilder(self._scratch)
+        if hasattr(self.base, "bind"):  # the base policy adopts the env's energy model
+            self.base.bind(self._scratch)
         self.sim = sim
 
     def candidates(self, sim: VertiportSim) -> list[int]:

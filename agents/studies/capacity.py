@@ -10,6 +10,12 @@ behind ``docs/training.md`` (section "Where the lost vehicles come from")::
 
 Days are validation seeds (800 000 onwards) unless ``--seeds`` says otherwise; training seeds
 are refused. The table goes to stdout (Markdown); ``--csv`` also writes one row per day.
+
+Given config names or paths instead, it plays no day: it derives each vertiport's capacity from
+its config alone (:mod:`marl_vertiport.sim.capacity`) and prints *carried*, *marginal* or
+*overloaded* with the numbers behind the verdict::
+
+    marl-vertiport capacity paper paper_overloaded large
 """
 
 from __future__ import annotations
@@ -26,6 +32,8 @@ from agents.controllers.episode import run_episode
 from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from agents.common.seeds import VALIDATION_SEED_BASE, parse_seed_range
 from marl_vertiport import ConfigError, vertiport_v1
+from marl_vertiport.config import load_config
+from marl_vertiport.sim.capacity import capacity, table as capacity_table
 from marl_vertiport.sim.schema import ON_CHARGER
 
 
@@ -106,6 +114,9 @@ def table(rows: list[dict[str, float]]) -> str:
 def main(argv: list[str] | None = None, prog: str = "python -m agents.studies.capacity") -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("configs", nargs="*", metavar="CONFIG",
+                        help="config names or paths: print their capacity, derived from the "
+                             "config alone (rules v1), and play no day")
     parser.add_argument("--agent", default="heuristic",
                         help=f"controller: {agent_help()} (default: heuristic)")
     parser.add_argument("--config", default="paper", help="env config (default: paper)")
@@ -115,6 +126,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.studies.ca
                         help="seed range START:STOP (default: the first 20 validation seeds)")
     parser.add_argument("--csv", type=Path, help="also write one row per day to this CSV file")
     args = parser.parse_args(argv)
+    if args.configs:
+        return _analytic(args.configs)
     try:
         seeds = parse_seed_range(args.seeds)
         if min(args.fleet) < 1:
@@ -139,6 +152,23 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.studies.ca
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
+    return 0
+
+
+def _analytic(configs: list[str]) -> int:
+    """Print the capacity of each config (``marl_vertiport.sim.capacity``); exit 2 on a config
+    that does not load."""
+    try:
+        rows = [capacity(load_config(name)) for name in configs]
+    except (ConfigError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print("Capacity derived from each config (rules v1; no simulated day), "
+          "docs/environment.md, section 8:\n")
+    print(capacity_table(rows))
+    print()
+    for c in rows:
+        print(f"{c.name}: {c.verdict}: {c.reason}")
     return 0
 
 

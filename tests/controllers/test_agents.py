@@ -183,6 +183,34 @@ def test_dispatcher_counts_holding_vehicles_as_waiting_for_the_charger():
     assert not DispatcherController(holding=False)._charger_wanted(Observation(obs))
 
 
+def test_bound_dispatcher_takes_off_on_what_a_trip_needs_not_a_fixed_90_percent():
+    env = vertiport_v1.env(config="paper")
+    sim = env.unwrapped.sim
+    d = DispatcherController()
+    d.bind(sim)
+    cfg = sim.cfg
+    need = (sim.energy.trip_pct.max(axis=1) + cfg.atc.energy_reserve_pct
+            + 2 * sim.n * cfg.battery.hover_drain_pct)  # two turns of hovering on return
+    assert np.allclose(d._takeoff_need_pct, np.minimum(need, 90.0))
+    assert d._takeoff_need_pct.max() < 50.0  # calibrated trips cost 10-20 %
+    assert d.cruise_drain_pct_per_m == 0.125
+    # At the start of a day, a vehicle on a normal port that idled into its window at 60 %
+    # takes off; unbound (a take-off needs 90 %) it would stay and idle on.
+    env.reset(seed=800000)
+    obs = env.observe(env.agent_selection)
+    rows = obs["observation"]["evtol_nodes"]
+    me = int(np.argmax(rows[:, COL["is_self"]]))
+    assert rows[me, COL["status"]] == ON_PORT and obs["action_mask"][1]  # this day's evtol_0
+    rows = rows.copy()
+    rows[me, COL["battery_pct"]] = 60.0
+    rows[me, COL["minutes_to_schedule"]] = 0.0
+    obs = {"observation": dict(obs["observation"], evtol_nodes=rows),
+           "action_mask": obs["action_mask"]}
+    assert d.act(obs) == 1
+    assert DispatcherController().act(obs) != 1
+    env.close()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 @pytest.mark.parametrize("name", ["fcfs", "heuristic"])
