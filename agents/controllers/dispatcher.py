@@ -18,16 +18,24 @@ minutes (the round-robin), so every timing decision looks one turn ahead:
   in the air).
 * **Take-offs.** A vehicle takes off inside its on-time window once it has enough charge for a
   trip; on a charger it keeps charging until full or until its last on-time turn, unless
-  another vehicle needs the charger. A vehicle short of charge stays (late beats stranded).
-* **Repositioning.** A vehicle idling on a normal port moves to the nearest free charger.
+  another vehicle needs the charger. A vehicle short of charge stays (late beats stranded). On
+  a normal port, where idling costs 4 %/min, it leaves before its window rather than idle
+  below what the trip needs.
+* **Repositioning.** A vehicle idling on a normal port moves to the nearest free charger,
+  unless vehicles needier than it would run out without it.
+* **Energy model.** Bound to an env (:meth:`DispatcherController.bind`, which the episode
+  runners call), it adopts the env's drains and reserve, and a take-off needs the dearest trip
+  from the vehicle's port, the reserve and two turns of hovering on return (at most 90 %);
+  a vehicle on a charger that another one wants leaves 40 % above that, and at once when a
+  waiting vehicle would otherwise run out within two turns. Unbound, it takes off at 90 %.
 
 ``DispatcherController(holding=False)`` is the earlier dispatcher without the holding pattern
 and the priority (hovering vehicles wait in place, first come first served); the two are
 compared in ``docs/training.md`` (section "Where the lost vehicles come from").
 
 Every flight it chooses is one the action mask clears, so with the env's energy check
-(``atc.energy_check``) it never starts a flight the battery cannot finish. The energy constants
-are the defaults of the shipped configs (``configs/env/paper.yaml``); the controller sees only
+(``atc.energy_check``) it never starts a flight the battery cannot finish. Unbound, the energy
+constants are the paper's (``cruise_drain_pct_per_m`` 0.5, unscaled); the decisions read only
 the observation.
 """
 
@@ -80,6 +88,18 @@ class DispatcherController(Controller):
         port_clearance_m: least horizontal distance (m) between a holding move's path and any
             port, so that it stays clear of the vehicles climbing from and descending to the
             ports (the separation minimum, 3 m, plus the vehicle size).
+        return_wait_turns: bound (:meth:`bind`): turns of hovering on return, waiting for a
+            charging port, that a take-off must have the charge for beyond the trip and the
+            reserve.
+        release_margin_pct: bound: a vehicle on a charging port that another vehicle wants
+            takes off early once it has this much more than its take-off needs (at most
+            ``early_release_battery_pct``).
+        danger_turns: bound: a vehicle waiting for a charging port that would run out (less
+            the reserve) within this many turns, hovering or idling, makes a vehicle on a
+            charging port that can fly take off, and one on a normal port leave the charging
+            port to it.
+        ground_idle_drain_pct_per_min: battery a vehicle idling on a normal port loses per
+            minute.
     """
 
     name = "heuristic"
