@@ -13,7 +13,8 @@ from agents.evaluate.metrics import DIRECTION, METRIC_LABELS, agent_label, case_
 from agents.evaluate.settings import ACTION_EPISODES, Evaluation
 from agents.evaluate.tables import (
     CSV_DIGITS,
-    decimals, episodes_csv, format_interval, results_json, summary_csv,
+    decimals, episodes_csv, format_cell, format_interval, results_json, summary_csv,
+    summary_metrics,
 )
 from agents.evaluate.figures import action_distribution_figure, case_study_figure
 
@@ -39,7 +40,15 @@ reward. *Lost in the air* counts eVTOLs whose battery ran out in flight (an emer
 out of service for the rest of the day; the paper's battery depletions); *lost on the ground*
 counts eVTOLs left on a normal port with a battery from which no flight the ATC may clear
 reaches a charger (they never serve again that day); *service lost* adds up the minutes from
-each loss to the end of the day. *Completed trips* are touchdowns after a landing clearance.
+each loss to the end of the day. *Unforced losses/day* are, on each day, the vehicles an agent
+lost beyond the fewest that any reference agent (the dispatcher `heuristic` and the look-ahead
+planner `rollout`, those of them evaluated) lost on the same day, averaged over the days a
+reference agent played (n/a where none did); a loss every reference agent suffers too is forced
+by the day. *Landings below reserve* count completed trips that touched down with less battery
+than the config's landing reserve (`battery.landing_reserve_pct`; 0 unless the config sets one,
+as the realistic energy profile does, docs/energy.md); the emergency landings of depleted
+vehicles are the depletions, not counted here. *Completed trips* are touchdowns after a landing
+clearance.
 """
 
 
@@ -102,11 +111,11 @@ def _case_change_findings(evaluation: Evaluation) -> list[str]:
 def _report_table(evaluation: Evaluation, config: str) -> str:
     agents = [a for a in evaluation.settings.agents
               if evaluation.stat(a, config, evaluation.metrics[0]) is not None]
-    metrics = [m for m in evaluation.metrics if m != "steps"]
+    metrics = [m for m in summary_metrics(evaluation) if m != "steps"]
     lines = ["| metric | " + " | ".join(agent_label(a) for a in agents) + " |",
              "|---|" + "---:|" * len(agents)]
     for metric in metrics:
-        cells = [format_interval(evaluation.stat(a, config, metric)) for a in agents]
+        cells = [format_cell(evaluation.stat(a, config, metric)) for a in agents]
         lines.append(f"| {METRIC_LABELS.get(metric, metric)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

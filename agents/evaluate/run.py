@@ -10,6 +10,7 @@ from agents.controllers.registry import AgentSpecError, make_controller
 from agents.evaluate.settings import EvalSettings, Evaluation, InputError
 from agents.evaluate.episodes import cached_env, close_envs, run_episodes
 from agents.evaluate.stats import scalar_metrics, summarize
+from agents.evaluate.unforced import unforced_rows, with_unforced
 from agents.execution import Backend, LocalBackend
 
 def check_agent(spec: str) -> None:
@@ -60,7 +61,8 @@ def validate(settings: EvalSettings) -> dict[str, list[str]]:
 def evaluate(settings: EvalSettings, workers: int = 1, progress: bool = True,
              action_names: dict[str, list[str]] | None = None,
              backend: Backend | None = None) -> Evaluation:
-    """Validate, run every episode and summarise. Raises :class:`InputError` on bad input.
+    """Validate, run every episode and summarise (the episode metrics, then the unforced losses
+    across agents, :mod:`agents.evaluate.unforced`). Raises :class:`InputError` on bad input.
 
     The episodes run on ``backend`` (:mod:`agents.execution`), by default on ``workers`` local
     processes (1: this process); the results do not depend on which."""
@@ -74,8 +76,10 @@ def evaluate(settings: EvalSettings, workers: int = 1, progress: bool = True,
     finally:
         close_envs()
     metrics = scalar_metrics(records)
-    return Evaluation(settings, records, action_names, metrics,
-                      summarize(records, settings, metrics), error,
+    # The unforced losses compare agents on the same days: made once every day is played.
+    summary = with_unforced(summarize(records, settings, metrics),
+                            unforced_rows(records, settings))
+    return Evaluation(settings, records, action_names, metrics, summary, error,
                       seconds=time.perf_counter() - start, provenance=made_with)
 
 

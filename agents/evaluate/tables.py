@@ -9,8 +9,11 @@ import math
 from typing import Any, Iterable, Sequence
 
 
-from agents.evaluate.metrics import METRIC_LABELS, TABLE_METRICS, case_label
+from agents.evaluate.metrics import (
+    DERIVED_AFTER, DERIVED_METRICS, METRIC_LABELS, TABLE_METRICS, case_label,
+)
 from agents.evaluate.settings import Evaluation
+from agents.evaluate.unforced import reference_agents
 
 
 def decimals(half_width: float, mean: float) -> int:
@@ -30,14 +33,35 @@ def format_interval(row: dict[str, Any]) -> str:
     return f"{row['mean']:.{d}f} [{row['ci_low']:.{d}f}, {row['ci_high']:.{d}f}]"
 
 
+def summary_metrics(evaluation: Evaluation) -> list[str]:
+    """The metrics of the summary in the order the tables show them: the episode metrics, with
+    those derived across agents (the unforced losses) right after the vehicles lost, where the
+    summary has them."""
+    present = {row["metric"] for row in evaluation.summary}
+    derived = [m for m in DERIVED_METRICS if m in present]
+    out: list[str] = []
+    for metric in evaluation.metrics:
+        out.append(metric)
+        if metric == DERIVED_AFTER:
+            out += derived
+    return out + [m for m in derived if m not in out]
+
+
+def format_cell(row: dict[str, Any] | None) -> str:
+    """:func:`format_interval`, or ``n/a`` for a metric an agent has no value of in a case (no
+    unforced losses where no reference agent played its days)."""
+    return "n/a" if row is None else format_interval(row)
+
+
 def format_table(evaluation: Evaluation) -> str:
     """The console table: one block per case, agents as rows, ``mean [95 % CI]`` as in the
     report."""
-    metrics = [m for m in TABLE_METRICS if m in evaluation.metrics]
+    shown = summary_metrics(evaluation)
+    metrics = [m for m in TABLE_METRICS if m in shown]
     pct = round(100 * evaluation.settings.confidence)
     blocks = []
     for config in evaluation.settings.configs:
-        rows = [[agent] + [format_interval(evaluation.stat(agent, config, m)) for m in metrics]
+        rows = [[agent] + [format_cell(evaluation.stat(agent, config, m)) for m in metrics]
                 for agent in evaluation.settings.agents
                 if evaluation.stat(agent, config, metrics[0]) is not None] if metrics else []
         if not rows:
@@ -101,7 +125,8 @@ def summary_csv(evaluation: Evaluation) -> str:
 
 
 def results_json(evaluation: Evaluation, command: str) -> str:
-    """Everything: settings, per-episode metrics (with action counts), the summary."""
+    """Everything: settings, per-episode metrics (with action counts), the summary (with the
+    unforced losses, and the reference agents they were measured against)."""
     doc = {
         "complete": evaluation.complete,
         "error": evaluation.error,
@@ -113,6 +138,7 @@ def results_json(evaluation: Evaluation, command: str) -> str:
         "episodes": [{"agent": r.task.agent, "config": r.task.config, "episode": r.task.episode,
                       "seed": r.task.seed, "metrics": r.metrics} for r in evaluation.records],
         "summary": evaluation.summary,
+        "unforced_reference": reference_agents(evaluation.settings),
     }
     return json.dumps(doc, indent=1, allow_nan=True) + "\n"
 

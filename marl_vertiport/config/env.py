@@ -131,9 +131,20 @@ class BatteryConfig:
     ground_idle_drain_pct: float = 4.0
     """Drain of a vehicle idling on a normal port (or a failed charger)."""
     charge_pct: float = 10.0
-    """Charge gained per step on a working charging port."""
+    """Charge gained per step on a working charging port (below ``charge_taper_start_pct``)."""
     min_cruise_distance_m: float = 1.0
     """Below this distance in a step an airborne vehicle counts as hovering."""
+    charge_taper_start_pct: float = 100.0
+    """Above this charge the charge per step falls linearly, from ``charge_pct`` here to
+    ``charge_taper_end_pct`` at 100 % (the constant-voltage phase of a lithium-ion charge), read
+    at the level the step starts from; 100: no taper, every step gains ``charge_pct``."""
+    charge_taper_end_pct: float = 0.0
+    """Charge per step at 100 % when the charge tapers; at most ``charge_pct`` (a taper only
+    slows the charge)."""
+    landing_reserve_pct: float = 0.0
+    """Battery a landing should leave: a completed trip that touches down below it counts in the
+    episode metric ``reserve_violations``. Measured, never enforced (the ATC's energy check
+    keeps its own margin, ``atc.energy_reserve_pct``); 0: no landing falls below it."""
 
 
 @dataclass(frozen=True)
@@ -374,6 +385,12 @@ def _validate(cfg: EnvConfig) -> None:
     for name in ("cruise_drain_pct_per_m", "cruise_drain_scale", "hover_drain_pct",
                  "ground_idle_drain_pct", "charge_pct", "min_cruise_distance_m"):
         _check(getattr(bat, name) >= 0, f"battery.{name}", "must be >= 0")
+    for name in ("charge_taper_start_pct", "landing_reserve_pct"):
+        _check(0 <= getattr(bat, name) <= 100, f"battery.{name}",
+               f"must lie in [0, 100], got {getattr(bat, name):g}")
+    _check(0 <= bat.charge_taper_end_pct <= bat.charge_pct, "battery.charge_taper_end_pct",
+           f"must lie in [0, battery.charge_pct = {bat.charge_pct:g}] (a taper only slows the "
+           f"charge), got {bat.charge_taper_end_pct:g}")
 
     for name in ("takeoff_weight", "landing_weight", "battery_weight", "delay_weight",
                  "safety_weight", "term_magnitude"):

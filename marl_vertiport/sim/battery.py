@@ -7,12 +7,14 @@
   (2 %);
 * idling on a normal port, or on a charging port whose charger failed this step:
   ``-ground_idle_drain_pct`` (4 %);
-* on a working charging port: ``+charge_pct`` (10 %);
+* on a working charging port: ``+charge_pct`` (10 %); with a taper
+  (``charge_taper_start_pct`` below 100, off by default), above the taper's start the gain falls
+  linearly to ``charge_taper_end_pct`` at 100 %, read at the level the step starts from;
 * out of service: 0.
 
 Levels are clipped to ``[0, 100]``. The status that counts is the one during the step (after the
-action). docs/environment.md, section 8; the energy a planned flight needs is
-:mod:`marl_vertiport.sim.energy`.
+action). docs/environment.md, section 8, and docs/energy.md (the taper); the energy a planned
+flight needs is :mod:`marl_vertiport.sim.energy`.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from marl_vertiport.config import BatteryConfig
 
 
 class BatteryModel:
-    """Battery change per step by status and distance flown.
+    """Battery change per step by status, distance flown and (with a taper) level.
 
     Args:
         battery: the config's battery section.
@@ -38,16 +40,33 @@ class BatteryModel:
         rate = [-battery.hover_drain_pct if up else 0.0 for up in airborne]
         rate[on_port] = -battery.ground_idle_drain_pct
         rate[on_charger] = battery.charge_pct
-        #: Change per step by status code, before the distance flown is known.
+        #: Change per step by status code, before the distance flown (or the level) is known.
         self.rate_pct = tuple(rate)
         #: Drain per metre flown when cruising.
         self.cruise_pct_per_m = battery.cruise_drain_pct_per_m * battery.cruise_drain_scale
+        self.on_charger = on_charger
+        #: Whether the charge per step depends on the level (``charge_taper_start_pct`` < 100).
+        self.tapers = battery.charge_taper_start_pct < 100.0
 
-    def changes(self, status_during: Sequence[int], moved: Iterable[tuple[int, float]],
+    def charge_rate_pct(self, level_pct: float) -> float:
+        """Charge per step on a working charging port for a battery at ``level_pct`` at the
+        start of the step: ``charge_pct`` up to ``charge_taper_start_pct``, then falling
+        linearly to ``charge_taper_end_pct`` at 100 %."""
+        cfg = self.cfg
+        start = cfg.charge_taper_start_pct
+        if level_pct <= start:
+            return cfg.charge_pct
+        return cfg.charge_pct + (cfg.charge_taper_end_pct - cfg.charge_pct) * (
+            (level_pct - start) / (100.0 - start))
+
+    def changes(self, level: Sequence[float], status_during: Sequence[int],
+                moved: Iterable[tuple[int, float]],
                 failed_charging: Iterable[int] = ()) -> list[float]:
         """Per vehicle, the battery change (percent) of this step.
 
         Args:
+            level: per vehicle, its battery (percent) at the start of the step, ``(N,)``; read
+                only when the charge tapers.
             status_during: per vehicle, its status code during the step, ``(N,)``.
             moved: ``(vehicle, metres flown)`` of the vehicles that moved this step.
             failed_charging: vehicles on a charging port whose charger failed this step.
@@ -55,6 +74,11 @@ class BatteryModel:
         cfg = self.cfg
         rate, per_m = self.rate_pct, self.cruise_pct_per_m
         change = [rate[s] for s in status_during]
+        if self.tapers:
+            on_charger = self.on_charger
+            for v, s in enumerate(status_during):
+                if s == on_charger:
+                    change[v] = self.charge_rate_pct(level[v])
         for v, dist in moved:
             if dist >= cfg.min_cruise_distance_m:
                 change[v] = -per_m * dist

@@ -190,6 +190,7 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         self.obs_xy = np.zeros((n, 2))
         self.lost = np.zeros(n, dtype=bool)  # stranded: in the air or on the ground for good
         self.lost_min = np.zeros(n)  # minute at the end of the step in which it was lost
+        self._trip_ends: list[int] = []  # vehicles whose trip touched down in this step
         # Rules v1 (sim/clearance.py): each vehicle's reserved volume (an id, -1: none), where
         # its current segment began, its holding slot (-1: none), and the vehicles back from
         # their destination that wait outside for a slot.

@@ -21,7 +21,8 @@ def reward_bound(sim: VertiportSim) -> float:
 
 def violations(sim: VertiportSim, reward: float | None = None) -> list[str]:
     """The invariants that fail now (empty when all hold): the step's reward finite and within
-    :func:`reward_bound`; batteries in [0, 100]; the clock at ``steps x minutes_per_step``; no
+    :func:`reward_bound`; batteries in [0, 100]; no more landings below the reserve than
+    completed trips; the clock at ``steps x minutes_per_step``; no
     vehicle inside the airspace below the ground; no two vehicles on the ground inside one
     another; each port or hover spot held by at most one vehicle, consistently both ways; a
     vehicle at rest on its node exactly there; a vehicle away outside the airspace (its
@@ -35,6 +36,10 @@ def violations(sim: VertiportSim, reward: float | None = None) -> list[str]:
         out.append(f"reward {reward} outside [-{reward_bound(sim)}, {reward_bound(sim)}]")
     bad = np.flatnonzero((sim.battery < 0.0) | (sim.battery > 100.0) | ~np.isfinite(sim.battery))
     out += [f"evtol_{v}: battery {sim.battery[v]}" for v in bad]
+    m = sim.metrics
+    if not 0 <= m.reserve_violations <= m.completed_trips:
+        out.append(f"{m.reserve_violations} landings below the reserve in {m.completed_trips} "
+                   f"completed trips")
     inside = sim.status != AWAY
     low = np.flatnonzero(inside & (sim.pos[:, 2] < sim.park_z_m - 1e-9))
     out += [f"evtol_{v}: below the ground (z {sim.pos[v, 2]:.3f} m)" for v in low]

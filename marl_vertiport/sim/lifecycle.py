@@ -119,6 +119,7 @@ class Lifecycle:
                     self.rng, self.minute + self.minutes_per_step)
                 self.dest[v] = int(self.rng.integers(len(lay.destination_xy_m)))
                 self.metrics.completed_trips += 1
+                self._trip_ends.append(v)  # its landing reserve is read after the step's drain
                 return 1
             return 0
         if s == DEPARTING:

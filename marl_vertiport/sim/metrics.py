@@ -5,7 +5,8 @@ The paper reports total reward, mean battery, good take-offs and landings, delay
 (section IV); the rest are ours (docs/environment.md, section 9). ``min_separation_m`` is the
 smallest centre distance of two vehicles in the airspace over the day (swept over each step; NaN
 for a day with fewer than two), ``separation_loss_min`` the minutes in which some pair was in
-loss of separation. :class:`EpisodeMetrics` holds
+loss of separation; ``reserve_violations`` the completed trips that touched down with a battery
+below ``battery.landing_reserve_pct`` (docs/energy.md). :class:`EpisodeMetrics` holds
 an episode's running totals; its :meth:`~EpisodeMetrics.summary` has exactly the keys of
 :data:`METRICS`, in that order, plus ``action_counts``.
 """
@@ -55,6 +56,7 @@ METRICS: dict[str, MetricInfo] = {
     "stranded_air": MetricInfo("lost in the air", better=-1, logged=True),
     "stranded_ground": MetricInfo("lost on the ground", better=-1, logged=True),
     "stranded": MetricInfo("vehicles lost", better=-1, logged=True),
+    "reserve_violations": MetricInfo("landings below reserve", better=-1),
     "service_min_lost": MetricInfo("service lost (min)", "service lost (min)", -1, True),
     "completed_trips": MetricInfo("completed trips"),
 }
@@ -85,6 +87,7 @@ class EpisodeMetrics:
     battery_depletions: int = 0
     stranded_air: int = 0
     stranded_ground: int = 0
+    reserve_violations: int = 0
     action_counts: np.ndarray | None = None
 
     def copy(self) -> "EpisodeMetrics":
@@ -116,6 +119,7 @@ class EpisodeMetrics:
             "stranded_air": self.stranded_air,
             "stranded_ground": self.stranded_ground,
             "stranded": self.stranded_air + self.stranded_ground,
+            "reserve_violations": self.reserve_violations,
             "service_min_lost": float(service_min_lost),
             "completed_trips": self.completed_trips,
             "action_counts": self.action_counts.tolist() if self.action_counts is not None else [],

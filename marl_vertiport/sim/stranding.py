@@ -19,8 +19,9 @@ class Stranding:
     (a part of it)."""
 
     def _update_battery(self, status_during: list[int], failed_nodes: list[int]) -> int:
-        """Drain or charge every battery for the step; take depleted airborne vehicles out of
-        service. Returns the number of depletions.
+        """Drain or charge every battery for the step; count the trips of this step that touched
+        down below ``battery.landing_reserve_pct`` (their battery after the step's drain); take
+        depleted airborne vehicles out of service. Returns the number of depletions.
 
         Args:
             status_during: per vehicle, its status while it moved this step (``N`` ints).
@@ -34,9 +35,14 @@ class Stranding:
             node = self.node.tolist()
             failed_charging = [v for v, s in enumerate(status_during)
                                if s == ON_CHARGER and node[v] in failed_nodes]
-        change = self.battery_model.changes(status_during, zip(self._moved, self._moved_m),
-                                            failed_charging)
-        level = self.battery_model.apply(self.battery.tolist(), change)
+        level = self.battery.tolist()
+        change = self.battery_model.changes(level, status_during,
+                                            zip(self._moved, self._moved_m), failed_charging)
+        level = self.battery_model.apply(level, change)
+        if self._trip_ends:  # touchdowns of this step, with the battery they land with
+            reserve = self.cfg.battery.landing_reserve_pct
+            self.metrics.reserve_violations += sum(level[v] < reserve for v in self._trip_ends)
+            self._trip_ends.clear()
         empty = [v for v, b in enumerate(level) if b <= 0.0 and AIRBORNE[status_during[v]]]
         self.battery[:] = level
         # The fleet's mean battery for the episode metric. Below 8 values numpy's sum adds them

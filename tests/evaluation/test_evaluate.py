@@ -35,7 +35,8 @@ METRICS = ["steps", "total_reward", "mean_battery_pct", "good_takeoffs", "good_l
            "takeoffs", "failed_takeoffs", "landings", "mean_delay_min", "collisions",
            "avoided_conflicts", "separation_losses", "min_separation_m",
            "separation_loss_min", "contacts", "battery_depletions",
-           "stranded_air", "stranded_ground", "stranded", "service_min_lost", "completed_trips"]
+           "stranded_air", "stranded_ground", "stranded", "reserve_violations", "service_min_lost",
+           "completed_trips"]
 
 
 class FirstLegal(Controller):

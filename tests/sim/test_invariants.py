@@ -126,8 +126,9 @@ def test_masked_out_action_names_the_legal_set():
 
 def test_episode_summary_has_exactly_the_registered_metrics_in_order():
     """One source for the metric list: the summary, the evaluation's labels and the training
-    logs all follow marl_vertiport.sim.metrics.METRICS."""
-    from agents.evaluate.metrics import DIRECTION, METRIC_LABELS
+    logs all follow marl_vertiport.sim.metrics.METRICS (the evaluation's labels add the
+    metrics it derives across agents, never an episode's)."""
+    from agents.evaluate.metrics import DERIVED_METRICS, DIRECTION, METRIC_LABELS
     from agents.training.curves import CURVE_KEYS
     from agents.training.vec_env import LOGGED_METRICS
     from marl_vertiport import vertiport_v1
@@ -137,7 +138,8 @@ def test_episode_summary_has_exactly_the_registered_metrics_in_order():
     env.reset(seed=0)
     summary = env.unwrapped.sim.episode_metrics()
     assert list(summary) == [*METRICS, "action_counts"]
-    assert list(METRIC_LABELS) == list(METRICS)
+    assert list(METRIC_LABELS) == [*METRICS, *DERIVED_METRICS]
+    assert not set(DERIVED_METRICS) & set(summary)
     assert set(DIRECTION) <= set(METRICS) and all(v in (-1, 1) for v in DIRECTION.values())
     assert LOGGED_METRICS == TRAINING_METRICS == CURVE_KEYS[-len(TRAINING_METRICS):]
     assert {"total_reward", "stranded", "collisions"} <= set(TRAINING_METRICS)

@@ -57,7 +57,7 @@ class TestBattery:
 
     def test_cruise_hover_failed_charger_and_clipping(self):
         status = [Status.TAXIING, Status.HOVERING, Status.ON_CHARGER, Status.ON_CHARGER, Status.ON_PORT]
-        change = self.model.changes([int(s) for s in status], [(0, 2.0), (1, 0.5)],
+        change = self.model.changes([50.0] * 5, [int(s) for s in status], [(0, 2.0), (1, 0.5)],
                                     failed_charging=[3])
         # 0.5 %/m x 0.25 (rules v1's calibration) x 2 m; 0.5 m is hovering
         assert change == [-0.25, -2.0, 10.0, -4.0, -4.0]
@@ -65,7 +65,7 @@ class TestBattery:
 
     def test_rules_v0_charge_the_papers_full_drain(self):
         v0 = BatteryModel(BatteryConfig(cruise_drain_scale=1.0), AIRBORNE, ON_PORT, ON_CHARGER)
-        assert v0.changes([int(Status.TAXIING)], [(0, 2.0)]) == [-1.0]  # 0.5 %/m x 2 m
+        assert v0.changes([50.0], [int(Status.TAXIING)], [(0, 2.0)]) == [-1.0]  # 0.5 %/m x 2 m
 
 
 class TestSchedule:
