@@ -216,12 +216,16 @@ FLEET_SIZES = (("4 eVTOLs (paper)", "paper", {}), ("8 eVTOLs (wide)", "wide", {}
 def bench_separation_check(days: int, repeats: int, config: str = "paper",
                            seed: int = 2000) -> dict[str, Any]:
     """AEC steps per second under the dispatcher's traffic with the separation check on (rules
-    v1) and off (rules v0), ``repeats`` interleaved replays each of its own recorded ``days``
-    days (the check changes what the dispatcher does, so each side replays its own traffic);
+    v1) and off (rules v0's procedures, at v1's energy calibration, so that both sides fly the
+    same energy model), ``repeats`` interleaved replays each of its own recorded ``days`` days
+    (the check changes what the dispatcher does, so each side replays its own traffic);
     medians and the check's cost ``1 - on / off``."""
     from marl_vertiport.config import load_config, with_rules
 
-    cfgs = {"on": load_config(config), "off": with_rules(load_config(config), 0)}
+    on = load_config(config)
+    off = with_rules(on, 0).replace(
+        **{"battery.cruise_drain_scale": on.battery.cruise_drain_scale})
+    cfgs = {"on": on, "off": off}
     traffic = {k: record_traffic("heuristic", c, days, seed) for k, c in cfgs.items()}
     rates: dict[str, list[float]] = {"on": [], "off": []}
     for _ in range(repeats):
