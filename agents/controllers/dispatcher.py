@@ -140,7 +140,7 @@ class DispatcherController(Controller):
         decisions still read only the observation. Unbound, the constructor's constants hold
         (the paper's drains, take-off at ``trip_battery_pct``)."""
         bat = sim.cfg.battery
-        self.cruise_drain_pct_per_m = bat.cruise_drain_pct_per_m * bat.cruise_drain_scale
+        self.cruise_drain_pct_per_m = bat.cruise_pct_per_m
         self.hover_drain_pct_per_min = bat.hover_drain_pct
         self.ground_idle_drain_pct_per_min = bat.ground_idle_drain_pct
         self.energy_reserve_pct = sim.cfg.atc.energy_reserve_pct
@@ -224,14 +224,14 @@ class DispatcherController(Controller):
                 return obs.takeoff
             if can_fly and wanted and battery >= self._release_pct(need):
                 return obs.takeoff  # early, but the charger is what keeps the fleet flying
-            if can_fly and self._takeoff_need_pct is not None and self._in_danger(obs).any():
+            if can_fly and self._bound and self._in_danger(obs).any():
                 return obs.takeoff  # another vehicle runs out before it would get the charger
             return obs.stay
         # On a normal port: idling costs 4 %/min, so leave as soon as that is sensible.
         if can_fly and to_go <= self.tol:
             return obs.takeoff
         charger = self._nearest(obs, obs.reachable_nodes(CHARGING_PORT))
-        if charger is not None and (battery >= self.hop_battery_pct or self._takeoff_need_pct is not None):
+        if charger is not None and (battery >= self.hop_battery_pct or self._bound):
             danger = self._in_danger(obs)
             if not (danger.sum() >= obs.free_nodes(CHARGING_PORT).size
                     and (obs.fleet("battery_pct")[danger] < battery).all()):
@@ -242,6 +242,11 @@ class DispatcherController(Controller):
                 to_go - self.tol + self._turn_gap(obs)) < need:
             return obs.takeoff
         return obs.stay
+
+    @property
+    def _bound(self) -> bool:
+        """Whether :meth:`bind` gave this dispatcher an env's energy model."""
+        return self._takeoff_need_pct is not None
 
     def _in_danger(self, obs: Observation) -> np.ndarray:
         """Per other vehicle, whether it waits for a charging port (aloft, arriving, or idling
@@ -260,13 +265,13 @@ class DispatcherController(Controller):
     def _release_pct(self, need: float) -> float:
         """Charge at which a vehicle on a charging port that another vehicle wants takes off
         early."""
-        if self._takeoff_need_pct is None:
+        if not self._bound:
             return self.early_release_battery_pct
         return min(self.early_release_battery_pct, need + self.release_margin_pct)
 
     def _fleet_need(self, obs: Observation) -> np.ndarray:
         """Per vehicle, the charge it needs to take off from the port it is on, ``(N,)``."""
-        if self._takeoff_need_pct is None:
+        if not self._bound:
             return np.full(len(obs.fleet("node")), self.trip_battery_pct)
         node = obs.fleet("node").astype(int)
         ports = len(self._takeoff_need_pct)
@@ -275,7 +280,7 @@ class DispatcherController(Controller):
 
     def _takeoff_need(self, obs: Observation) -> float:
         """Charge (percent) the acting vehicle needs to take off from its port."""
-        if self._takeoff_need_pct is None:
+        if not self._bound:
             return self.trip_battery_pct
         return float(self._takeoff_need_pct[int(obs.mine("node"))])
 

@@ -146,6 +146,12 @@ class BatteryConfig:
     episode metric ``reserve_violations``. Measured, never enforced (the ATC's energy check
     keeps its own margin, ``atc.energy_reserve_pct``); 0: no landing falls below it."""
 
+    @property
+    def cruise_pct_per_m(self) -> float:
+        """Drain per metre flown when cruising: ``cruise_drain_pct_per_m`` times
+        ``cruise_drain_scale``."""
+        return self.cruise_drain_pct_per_m * self.cruise_drain_scale
+
 
 @dataclass(frozen=True)
 class RewardConfig:

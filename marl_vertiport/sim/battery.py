@@ -43,7 +43,7 @@ class BatteryModel:
         #: Change per step by status code, before the distance flown (or the level) is known.
         self.rate_pct = tuple(rate)
         #: Drain per metre flown when cruising.
-        self.cruise_pct_per_m = battery.cruise_drain_pct_per_m * battery.cruise_drain_scale
+        self.cruise_pct_per_m = battery.cruise_pct_per_m
         self.on_charger = on_charger
         #: Whether the charge per step depends on the level (``charge_taper_start_pct`` < 100).
         self.tapers = battery.charge_taper_start_pct < 100.0

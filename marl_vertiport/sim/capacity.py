@@ -35,14 +35,12 @@ the verdicts against days of the dispatcher.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 from marl_vertiport.config import EnvConfig
 from marl_vertiport.sim.energy import FlightEnergy
 from marl_vertiport.sim.layout import Layout
 
-#: Verdicts, from best to worst.
-VERDICTS = ("carried", "marginal", "overloaded")
 #: Utilisation of the charging ports above which a queue builds up.
 MARGINAL_UTILISATION = 0.8
 
@@ -66,9 +64,6 @@ class Capacity:
     idle_wait_pct: float
     verdict: str
     reason: str
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def capacity(cfg: EnvConfig) -> Capacity:
@@ -95,9 +90,9 @@ def capacity(cfg: EnvConfig) -> Capacity:
 
     gap = n * minutes
     if cfg.atc.skip_agents_without_decision:  # a fixed point: the gap sets the share away
+        away_min = max(trip_min - _inside_min(cfg), 0.0)
         for _ in range(50):
             _, _, cyc = cycle(gap)
-            away_min = max(trip_min - _inside_min(cfg), 0.0)
             gap = max(n * (1.0 - away_min / cyc), 1.0) * minutes
     energy_pct, pad_min, cycle_min = cycle(gap)
     utilisation = n * pad_min / cycle_min / chargers
@@ -113,10 +108,11 @@ def capacity(cfg: EnvConfig) -> Capacity:
             f"the charging ports are busy {utilisation:.0%} of the time, so vehicles land on "
             f"normal ports, where a turn gap idling ({idle_wait:.0f} %) leaves less than a trip "
             "and the reserve")
-    elif stuck or utilisation > 1.0:
-        verdict, reason = "marginal", (
-            f"the charging ports are busy {utilisation:.0%} of the time" if not stuck else
-            f"a vehicle that lands on a normal port cannot fly again before it charges")
+    elif stuck:
+        verdict, reason = "marginal", ("a vehicle that lands on a normal port cannot fly again "
+                                       "before it charges")
+    elif utilisation > 1.0:
+        verdict, reason = "marginal", f"the charging ports are busy {utilisation:.0%} of the time"
     else:
         verdict, reason = "carried", (f"the charging ports are busy {utilisation:.0%} of the "
                                       f"time; a turn gap costs {hover_wait:.0f} % hovering")

@@ -2,9 +2,8 @@
 
 A vehicle flies each leg of a route straight toward the leg's end at ``step_len_m`` per step and
 stops there: the rest of that step is not carried over to the next leg. A step in which it moves
-at least ``min_cruise_distance_m`` costs ``cruise_drain_pct_per_m * cruise_drain_scale`` per metre
-moved; a shorter
-step costs ``hover_drain_pct``. These functions add that up for a route without gusts, which is
+at least ``min_cruise_distance_m`` costs ``cruise_pct_per_m`` of the battery config
+(``cruise_drain_pct_per_m * cruise_drain_scale``) per metre moved; a shorter step costs ``hover_drain_pct``. These functions add that up for a route without gusts, which is
 what the ATC's energy check (``atc.energy_check``) and the stranded-vehicle metric compare a
 battery against. A flight whose whole route costs ``E`` is finished with battery ``b`` if
 ``b > E`` (a vehicle that reaches 0 % while airborne is out of service).
@@ -13,28 +12,13 @@ battery against. A flight whose whole route costs ``E`` is finished with battery
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
 from marl_vertiport.config import BatteryConfig, EnvConfig
 from marl_vertiport.sim.geometry import length
 from marl_vertiport.sim.layout import CHARGING_PORT, HOVER_SPOT, Layout
-
-
-def leg_energy_pct(length_m: float, step_len_m: float, battery: BatteryConfig) -> float:
-    """Battery (percent) to fly one straight leg of ``length_m`` metres."""
-    if length_m <= 1e-9:
-        return 0.0
-    steps = max(math.ceil(length_m / step_len_m - 1e-9), 1)
-    last_m = length_m - (steps - 1) * step_len_m
-
-    def cost(moved_m: float) -> float:
-        if moved_m >= battery.min_cruise_distance_m:
-            return battery.cruise_drain_pct_per_m * battery.cruise_drain_scale * moved_m
-        return battery.hover_drain_pct
-
-    return (steps - 1) * cost(step_len_m) + cost(last_m)
 
 
 def leg_steps(length_m: float, step_len_m: float) -> int:
@@ -44,25 +28,46 @@ def leg_steps(length_m: float, step_len_m: float) -> int:
     return max(math.ceil(length_m / step_len_m - 1e-9), 1)
 
 
+def leg_energy_pct(length_m: float, step_len_m: float, battery: BatteryConfig) -> float:
+    """Battery (percent) to fly one straight leg of ``length_m`` metres."""
+    steps = leg_steps(length_m, step_len_m)
+    if steps == 0:
+        return 0.0
+    last_m = length_m - (steps - 1) * step_len_m
+
+    def cost(moved_m: float) -> float:
+        if moved_m >= battery.min_cruise_distance_m:
+            return battery.cruise_pct_per_m * moved_m
+        return battery.hover_drain_pct
+
+    return (steps - 1) * cost(step_len_m) + cost(last_m)
+
+
+def _leg_lengths_m(start: Sequence[float], waypoints: Sequence[Sequence[float]]
+                   ) -> Iterator[float]:
+    """Length (m) of each leg from ``start`` through ``waypoints`` (each ``(x, y, z)`` metres)."""
+    here = np.asarray(start, dtype=float)
+    for w in waypoints:
+        w = np.asarray(w, dtype=float)
+        yield length(w - here)
+        here = w
+
+
 def route_steps(start: Sequence[float], waypoints: Sequence[Sequence[float]],
                 step_len_m: float) -> int:
     """Steps to fly from ``start`` through ``waypoints`` (each ``(x, y, z)`` metres)."""
-    total, here = 0, np.asarray(start, dtype=float)
-    for w in waypoints:
-        w = np.asarray(w, dtype=float)
-        total += leg_steps(length(w - here), step_len_m)
-        here = w
+    total = 0
+    for leg_m in _leg_lengths_m(start, waypoints):
+        total += leg_steps(leg_m, step_len_m)
     return total
 
 
 def route_energy_pct(start: Sequence[float], waypoints: Sequence[Sequence[float]],
                      step_len_m: float, battery: BatteryConfig) -> float:
     """Battery (percent) to fly from ``start`` through ``waypoints`` (each ``(x, y, z)`` metres)."""
-    total, here = 0.0, np.asarray(start, dtype=float)
-    for w in waypoints:
-        w = np.asarray(w, dtype=float)
-        total += leg_energy_pct(length(w - here), step_len_m, battery)
-        here = w
+    total = 0.0
+    for leg_m in _leg_lengths_m(start, waypoints):
+        total += leg_energy_pct(leg_m, step_len_m, battery)
     return total
 
 
