@@ -10,24 +10,27 @@ minutes (the round-robin), so every timing decision looks one turn ahead:
   a free charging port goes to the waiting vehicle with the least battery. A hovering vehicle
   that cannot land on one waits in a **holding pattern beside the charger**: it moves to the
   free hover spot nearest to a charging port, then on between that spot and the next nearest
-  free one, on paths that keep clear of the ports. In the paper's battery model a vehicle in
-  motion spends 0.5 %/m (1 %/min at the shipped 2 m a step) and one hovering in place
-  2 %/min, so the pattern halves the drain of the wait, and the landing, when the charger
-  frees, is a short one. It waits until the ATC's energy check rules waiting out, then lands
+  free one, on paths that keep clear of the ports. In the battery model a vehicle in motion
+  spends the cruise drain per metre (under rules v1 0.125 %/m, 0.25 %/min at 2 m a minute) and
+  one hovering in place 2 %/min, so the pattern cuts the drain of the wait, and the landing,
+  when the charger frees, is a short one. It waits until the ATC's energy check rules waiting out, then lands
   on the nearest free port (a vehicle grounded on a pad is better than one that runs empty
   in the air).
 * **Take-offs.** A vehicle takes off inside its on-time window once it has enough charge for a
   trip; on a charger it keeps charging until full or until its last on-time turn, unless
   another vehicle needs the charger. A vehicle short of charge stays (late beats stranded). On
   a normal port, where idling costs 4 %/min, it leaves before its window rather than idle
-  below what the trip needs.
+  below what the trip needs (bound: below 20 % more than that, so that it leaves before the
+  others' windows crowd the airspace).
 * **Repositioning.** A vehicle idling on a normal port moves to the nearest free charger,
   unless vehicles needier than it would run out without it.
 * **Energy model.** Bound to an env (:meth:`DispatcherController.bind`, which the episode
   runners call), it adopts the env's drains and reserve, and a take-off needs the dearest trip
   from the vehicle's port, the reserve and two turns of hovering on return (at most 90 %);
   a vehicle on a charger that another one wants leaves 40 % above that, and at once when a
-  waiting vehicle would otherwise run out within two turns. Unbound, it takes off at 90 %.
+  waiting vehicle would otherwise run out within two turns. Its turn gaps are in minutes
+  (the fleet size times the env's minutes per step, so a scenario that decides twice a minute
+  has turns half as far apart). Unbound, it takes off at 90 %.
 
 ``DispatcherController(holding=False)`` is the earlier dispatcher without the holding pattern
 and the priority (hovering vehicles wait in place, first come first served); the two are
@@ -100,6 +103,10 @@ class DispatcherController(Controller):
             port to it.
         ground_idle_drain_pct_per_min: battery a vehicle idling on a normal port loses per
             minute.
+        leave_margin_pct: bound: a vehicle on a normal port takes off before its window once
+            idling to the window would leave it less than this much above its take-off need
+            (unbound: the need itself), so it leaves while the airspace is quieter than it will
+            be when the others' windows open.
     """
 
     name = "heuristic"
@@ -112,7 +119,8 @@ class DispatcherController(Controller):
                  holding: bool = True, priority_margin_pct: float = 5.0,
                  port_clearance_m: float = 4.0, return_wait_turns: float = 2.0,
                  release_margin_pct: float = 40.0, danger_turns: float = 2.0,
-                 ground_idle_drain_pct_per_min: float = 4.0) -> None:
+                 ground_idle_drain_pct_per_min: float = 4.0,
+                 leave_margin_pct: float = 20.0) -> None:
         self.trip_battery_pct = trip_battery_pct
         self.hop_battery_pct = hop_battery_pct
         self.early_release_battery_pct = early_release_battery_pct
@@ -128,6 +136,9 @@ class DispatcherController(Controller):
         self.release_margin_pct = release_margin_pct
         self.danger_turns = danger_turns
         self.ground_idle_drain_pct_per_min = ground_idle_drain_pct_per_min
+        self.leave_margin_pct = leave_margin_pct
+        #: Schedule minutes per step (bound: the env's; unbound, the paper's one minute).
+        self.minutes_per_step = 1.0
         self._holding_memo: dict[tuple, int | None] = {}
         #: Per port, the charge a take-off from it needs (``None`` until :meth:`bind`).
         self._takeoff_need_pct: np.ndarray | None = None
@@ -140,9 +151,11 @@ class DispatcherController(Controller):
         decisions still read only the observation. Unbound, the constructor's constants hold
         (the paper's drains, take-off at ``trip_battery_pct``)."""
         bat = sim.cfg.battery
+        minutes = sim.cfg.schedule.minutes_per_step  # the battery's rates are per step
+        self.minutes_per_step = minutes
         self.cruise_drain_pct_per_m = bat.cruise_pct_per_m
-        self.hover_drain_pct_per_min = bat.hover_drain_pct
-        self.ground_idle_drain_pct_per_min = bat.ground_idle_drain_pct
+        self.hover_drain_pct_per_min = bat.hover_drain_pct / minutes
+        self.ground_idle_drain_pct_per_min = bat.ground_idle_drain_pct / minutes
         self.energy_reserve_pct = sim.cfg.atc.energy_reserve_pct
         wait = self.return_wait_turns * sim.n * bat.hover_drain_pct
         need = sim.energy.trip_pct.max(axis=1) + self.energy_reserve_pct + wait
@@ -160,9 +173,10 @@ class DispatcherController(Controller):
         return obs.continue_ if obs.mask[obs.continue_] else obs.stay
 
     # ------------------------------------------------------------------ helpers
-    def _turn_gap(self, obs: Observation) -> int:
-        """Minutes until this vehicle's next turn (the fleet size, in round-robin order)."""
-        return len(obs.fleet("status"))
+    def _turn_gap(self, obs: Observation) -> float:
+        """Minutes until this vehicle's next turn: the fleet size in steps, in round-robin
+        order."""
+        return len(obs.fleet("status")) * self.minutes_per_step
 
     @staticmethod
     def _holding(obs: Observation) -> np.ndarray:
@@ -236,10 +250,11 @@ class DispatcherController(Controller):
             if not (danger.sum() >= obs.free_nodes(CHARGING_PORT).size
                     and (obs.fleet("battery_pct")[danger] < battery).all()):
                 return obs.go_to(charger)  # unless needier vehicles run out without it
-        # Idling to the window would leave too little for the trip: leave early (early beats
-        # stranded on the pad).
+        # Idling to the window would leave too little for the trip, or little more: leave early
+        # (early beats stranded on the pad, or held over it behind the others' departures).
+        margin = self.leave_margin_pct if self._bound else 0.0
         if can_fly and battery - self.ground_idle_drain_pct_per_min * (
-                to_go - self.tol + self._turn_gap(obs)) < need:
+                to_go - self.tol + self._turn_gap(obs)) < need + margin:
             return obs.takeoff
         return obs.stay
 

@@ -225,6 +225,11 @@ class ATCConfig:
     simulator holds the follower, each step, wherever its next step of flight would not clear
     that reservation. False: every reservation must be clear at the clearance (whole-leg
     reservations only)."""
+    trail_chains: bool = True
+    """Rules v1, with ``trail_departures``: True: a flight may be cleared behind a departure that
+    itself still waits behind another (holds then chain: each waits for the one ahead). False:
+    only behind departures that wait for none, so a hold lasts at most one departure's climb and
+    exit; a flight whose volume meets a waiting departure's reservation is not cleared."""
     holding_slots: int = 0
     """Rules v1: holding slots at the airspace boundary, at the arrival altitude; 0: one per
     vehicle (at least one per destination), as many as fit ``2 x`` the horizontal threshold

@@ -6,8 +6,11 @@ comes, and the waits for its turns in between. Per cycle, with the mean over por
 destinations of the planned trip (:class:`~marl_vertiport.sim.energy.FlightEnergy`, no gusts):
 
 * ``turn_gap_min``: minutes between two turns of a vehicle. The paper's rule gives every
-  vehicle a turn in order: ``N`` minutes. With ``atc.skip_agents_without_decision`` the vehicles
-  away are passed over: ``N`` times the share of a cycle a vehicle spends at the vertiport.
+  vehicle a turn in order: ``N`` steps, ``N`` minutes at one step a minute and half that where
+  the ATC decides twice a minute (``schedule.minutes_per_step``). With
+  ``atc.skip_agents_without_decision`` the vehicles away are passed over: ``N`` times the share
+  of a cycle a vehicle spends at the vertiport. The battery's rates are per step; the model
+  works in minutes.
 * ``energy_pct``: the trip's energy plus half a turn gap of hovering on return, the mean wait
   for the turn that lands it.
 * ``charger_min``: a charging port's minutes per cycle: the vehicle's time on the ground, the
@@ -79,7 +82,7 @@ def capacity(cfg: EnvConfig) -> Capacity:
     charge_pct_per_min = bat.charge_pct * (1.0 - cfg.uncertainty.charger_failure_prob) / minutes
     hover_per_min, idle_per_min = bat.hover_drain_pct / minutes, bat.ground_idle_drain_pct / minutes
 
-    turnaround = sum(sc.takeoff_after_landing_min) / 2.0 * minutes
+    turnaround = sum(sc.takeoff_after_landing_min) / 2.0  # schedule minutes
     reserve = cfg.atc.energy_reserve_pct
 
     def cycle(gap: float) -> tuple[float, float, float]:

@@ -62,6 +62,7 @@ class Clearance:
         atc, lay = self.cfg.atc, self.layout
         self.sep_check = atc.separation_check
         self.trail = self.sep_check and atc.trail_departures
+        self.trail_chains = atc.trail_chains
         sep = self.cfg.safety.min_separation_m
         self.clear_h_m = sep + atc.horizontal_buffer_m
         self.clear_v_m = sep + atc.vertical_buffer_m
@@ -211,12 +212,17 @@ class Clearance:
     def _others(self, v: int, trail: bool) -> list[tuple[int, int]]:
         """``(vehicle, reservation id)`` of every reservation a clearance of vehicle ``v`` must
         clear: all but ``v``'s own, and, with ``trail`` and ``atc.trail_departures``, but those
-        of departing vehicles (a clearance may follow them, :meth:`_note_leaders`)."""
+        of departing vehicles (a clearance may follow them, :meth:`_note_leaders`); without
+        ``atc.trail_chains``, only of departing vehicles that follow none themselves."""
         res = self.reservation.tolist()
         if trail and self.trail:
             status = self.status.tolist()
+            if self.trail_chains:
+                return [(u, rid) for u, rid in enumerate(res)
+                        if u != v and rid >= 0 and status[u] != DEPARTING]
+            leaders = self.leaders
             return [(u, rid) for u, rid in enumerate(res)
-                    if u != v and rid >= 0 and status[u] != DEPARTING]
+                    if u != v and rid >= 0 and (status[u] != DEPARTING or leaders[u])]
         return [(u, rid) for u, rid in enumerate(res) if u != v and rid >= 0]
 
     def _other_rids(self, v: int, trail: bool) -> tuple[int, ...]:

@@ -211,6 +211,18 @@ def test_bound_dispatcher_takes_off_on_what_a_trip_needs_not_a_fixed_90_percent(
     env.close()
 
 
+def test_bound_dispatcher_counts_turns_in_minutes_where_the_atc_decides_twice_a_minute():
+    env = vertiport_v1.env(config="wide")  # 8 eVTOLs, half-minute steps
+    d = DispatcherController()
+    d.bind(env.unwrapped.sim)
+    assert d.minutes_per_step == 0.5
+    assert d.hover_drain_pct_per_min == 2.0 and d.ground_idle_drain_pct_per_min == 4.0
+    env.reset(seed=800000)
+    obs = Observation(env.observe(env.agent_selection))
+    assert d._turn_gap(obs) == 4.0  # 8 turns of half a minute
+    env.close()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
 @pytest.mark.parametrize("name", ["fcfs", "heuristic"])

@@ -49,6 +49,23 @@ def test_more_charging_ports_lower_the_utilisation():
     assert many.normal_ports == 0 and few.normal_ports == 6
 
 
+#: `wide` at the paper's one decision a minute (its config decides twice a minute).
+ONE_A_MINUTE = {"schedule.minutes_per_step": 1.0, "schedule.episode_steps": 1440,
+                "flight.flight_seconds_per_step": 0.25, "flight.physics_rate_hz": 48.0,
+                "battery.hover_drain_pct": 2.0, "battery.ground_idle_drain_pct": 4.0,
+                "battery.charge_pct": 10.0, "battery.min_cruise_distance_m": 1.0}
+
+
+def test_two_decisions_a_minute_halve_the_turn_gap_and_keep_every_rate_per_minute():
+    half, one = capacity(load_config("wide")), capacity(load_config("wide", **ONE_A_MINUTE))
+    assert half.turn_gap_min == one.turn_gap_min / 2 == 4.0
+    assert half.hover_wait_pct == one.hover_wait_pct / 2 == 8.0  # 2 %/min for 4 minutes
+    assert half.charger_min == one.charger_min == 15.0  # the plan's turnaround, in minutes
+    # A leg's last, partial step costs a step of hovering: half as much at half a minute.
+    assert one.trip_pct - 2.5 < half.trip_pct < one.trip_pct
+    assert half.trip_min == pytest.approx(one.trip_min, abs=2.0)  # steps rounded up per leg
+
+
 def lost_per_day(name, seeds):
     env = vertiport_v1.env(config=name)
     lost = [run_aec_episode(env, make_controller("heuristic"), seed=s)["stranded"] for s in seeds]
@@ -61,6 +78,7 @@ def test_verdicts_agree_with_days_of_the_dispatcher():
     assert lost_per_day("paper", range(800000, 800003)) == 0.0
     assert lost_per_day("paper_overloaded", range(800000, 800003)) >= 1.0
     assert lost_per_day("large_overloaded", range(800000, 800001)) >= 4.0
+    assert lost_per_day("large", range(800000, 800002)) == 0.0
 
 
 def test_cli_prints_the_table_and_names_a_broken_config(capsys, tmp_path):

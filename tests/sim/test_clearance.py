@@ -153,6 +153,36 @@ def test_a_vehicle_yields_only_to_older_clearances():
     assert 0 in sim.leaders[2]
 
 
+def test_without_chains_nothing_is_cleared_behind_a_departure_that_waits_itself():
+    """``atc.trail_chains``: evtol_1's departure (west, over port 0) follows evtol_0's climb
+    from port 0. With chains a move of evtol_2 to port 1 may follow evtol_1; without, it is
+    masked until evtol_1 waits for no one, and then it may follow it."""
+    for chains in (True, False):
+        sim = make(fleet=3, **{"atc.trail_chains": chains})
+        to_port1 = node_action(sim, 1)
+        park(sim, 0, 0)  # evtol_0 on normal port 0, for the north
+        park(sim, 1, 1)  # evtol_1 on normal port 1, for the west: across port 0
+        park(sim, 2, 3)  # evtol_2 hovering at (-14, 0)
+        sim.dest[0], sim.dest[1] = 0, 1
+        sim._mask_cache = {}
+        sim.acting = 0
+        sim.step(TAKEOFF)
+        sim.acting = 1
+        sim.step(TAKEOFF)
+        assert sim.leaders[1] == (0,)
+        if chains:
+            assert sim.action_mask(2)[to_port1] == 1
+            continue
+        assert sim.action_mask(2)[to_port1] == 0
+        assert sim.mask_reasons(2)[to_port1] == "separation: evtol_1"
+        while sim.leaders[1]:
+            acts = sim.actions
+            a = acts.continue_ if sim.action_mask(sim.acting)[acts.continue_] else STAY
+            sim.step(a)
+            assert violations(sim) == []
+        assert sim.status[1] == DEPARTING and sim.action_mask(2)[to_port1] == 1
+
+
 def test_overlapping_clearances_mask_the_second_and_disjoint_ones_are_both_legal():
     sim = make(fleet=3)
     park(sim, 0, 3)  # at (-14, 0)
