@@ -217,12 +217,9 @@ class Clearance:
         res = self.reservation.tolist()
         if trail and self.trail:
             status = self.status.tolist()
-            if self.trail_chains:
-                return [(u, rid) for u, rid in enumerate(res)
-                        if u != v and rid >= 0 and status[u] != DEPARTING]
-            leaders = self.leaders
+            waiting = () if self.trail_chains else self.leaders  # empty: no departure counts
             return [(u, rid) for u, rid in enumerate(res)
-                    if u != v and rid >= 0 and (status[u] != DEPARTING or leaders[u])]
+                    if u != v and rid >= 0 and (status[u] != DEPARTING or (waiting and waiting[u]))]
         return [(u, rid) for u, rid in enumerate(res) if u != v and rid >= 0]
 
     def _other_rids(self, v: int, trail: bool) -> tuple[int, ...]:
