@@ -32,6 +32,21 @@ minutes (the round-robin), so every timing decision looks one turn ahead:
   (the fleet size times the env's minutes per step, so a scenario that decides twice a minute
   has turns half as far apart). Unbound, it takes off at 90 %.
 
+Two rules are options, off by default (tried on validation days, docs/environment.md, section
+8.3; neither is part of the frozen dispatcher):
+
+* **Departures first** (``yield_margin_pct``). Bound, a hovering vehicle that can afford to
+  wait (after one more turn of hovering it would still hold the dearest take-off need and
+  ``yield_margin_pct`` more) and whose landing stays on time at its next turn does not start
+  a landing while a vehicle on a normal port is ready to take off (charged for it, in its
+  window or at most a turn before): a landing across the field holds the departures under its
+  path for as long as it flies, at 2 m a minute many minutes, and a vehicle held on a normal
+  port idles at 4 %/min, twice the drain of hovering.
+* **Behind other departures** (``departure_hold_min``). Bound, on a charging port a take-off
+  also needs ``departure_hold_min`` minutes of hovering for each other vehicle departing: the
+  separation check may hold it over its pad behind each of them, at the hover drain, while on
+  the charger the wait costs nothing.
+
 ``DispatcherController(holding=False)`` is the earlier dispatcher without the holding pattern
 and the priority (hovering vehicles wait in place, first come first served); the two are
 compared in ``docs/training.md`` (section "Where the lost vehicles come from").
@@ -47,7 +62,8 @@ from __future__ import annotations
 import numpy as np
 
 from agents.controllers.base import (
-    ARRIVING, CHARGING_PORT, HOVER_SPOT, HOVERING, NORMAL_PORT, ON_CHARGER, ON_PORT, TAXIING,
+    ARRIVING, CHARGING_PORT, DEPARTING, HOVER_SPOT, HOVERING, NORMAL_PORT, ON_CHARGER, ON_PORT,
+    TAXIING,
     Controller, Observation,
 )
 from marl_vertiport.sim.geometry import dot
@@ -107,6 +123,11 @@ class DispatcherController(Controller):
             idling to the window would leave it less than this much above its take-off need
             (unbound: the need itself), so it leaves while the airspace is quieter than it will
             be when the others' windows open.
+        yield_margin_pct: bound: a hovering vehicle yields the airspace to a vehicle ready to
+            take off from a normal port while, after one more turn of hovering, it would still
+            hold this much more than the dearest take-off need (``None``, the default: never).
+        departure_hold_min: bound: minutes of hovering a take-off from a charging port needs
+            for each other vehicle departing (0, the default: none).
     """
 
     name = "heuristic"
@@ -120,7 +141,9 @@ class DispatcherController(Controller):
                  port_clearance_m: float = 4.0, return_wait_turns: float = 2.0,
                  release_margin_pct: float = 40.0, danger_turns: float = 2.0,
                  ground_idle_drain_pct_per_min: float = 4.0,
-                 leave_margin_pct: float = 20.0) -> None:
+                 leave_margin_pct: float = 20.0,
+                 yield_margin_pct: float | None = None,
+                 departure_hold_min: float = 0.0) -> None:
         self.trip_battery_pct = trip_battery_pct
         self.hop_battery_pct = hop_battery_pct
         self.early_release_battery_pct = early_release_battery_pct
@@ -137,6 +160,8 @@ class DispatcherController(Controller):
         self.danger_turns = danger_turns
         self.ground_idle_drain_pct_per_min = ground_idle_drain_pct_per_min
         self.leave_margin_pct = leave_margin_pct
+        self.yield_margin_pct = yield_margin_pct
+        self.departure_hold_min = departure_hold_min
         #: Schedule minutes per step (bound: the env's; unbound, the paper's one minute).
         self.minutes_per_step = 1.0
         self._holding_memo: dict[tuple, int | None] = {}
@@ -294,12 +319,37 @@ class DispatcherController(Controller):
                         self._takeoff_need_pct[np.clip(node, 0, ports - 1)], self.trip_battery_pct)
 
     def _takeoff_need(self, obs: Observation) -> float:
-        """Charge (percent) the acting vehicle needs to take off from its port."""
+        """Charge (percent) the acting vehicle needs to take off from its port (bound, on a
+        charging port: with ``departure_hold_min`` of hovering per other departing vehicle)."""
         if not self._bound:
             return self.trip_battery_pct
-        return float(self._takeoff_need_pct[int(obs.mine("node"))])
+        need = float(self._takeoff_need_pct[int(obs.mine("node"))])
+        if obs.status == ON_CHARGER and self.departure_hold_min > 0:
+            status = obs.fleet("status").astype(int)
+            departing = int((status == DEPARTING).sum()) - int(status[obs.me] == DEPARTING)
+            need = min(need + self.hover_drain_pct_per_min * self.departure_hold_min * departing,
+                       99.0)
+        return need
+
+    def _yields_to_departures(self, obs: Observation) -> bool:
+        """Whether the acting vehicle, hovering, lets a departure from a normal port go
+        first (see "Departures first" in the module docstring)."""
+        if not self._bound or self.yield_margin_pct is None or not obs.mask[obs.stay]:
+            return False
+        gap = self._turn_gap(obs)
+        after_wait = obs.mine("battery_pct") - self.hover_drain_pct_per_min * gap
+        if after_wait < float(self._takeoff_need_pct.max()) + self.yield_margin_pct:
+            return False
+        if obs.mine("minutes_to_schedule") - gap < -self.tol:
+            return False  # the landing would be late at the next turn
+        status = obs.fleet("status").astype(int)
+        ready = ((status == ON_PORT) & (obs.fleet("minutes_to_schedule") <= self.tol + gap)
+                 & (obs.fleet("battery_pct") >= self._fleet_need(obs)))
+        return bool(ready.any())
 
     def _hovering(self, obs: Observation) -> int:
+        if self._yields_to_departures(obs):
+            return obs.stay
         chargers = obs.reachable_nodes(CHARGING_PORT)
         if self.holding and chargers.size and obs.mask[obs.stay]:
             others = np.arange(len(obs.fleet("status"))) != obs.me

@@ -4,7 +4,9 @@ ordering random < FCFS < heuristic on fixed seeds."""
 import numpy as np
 import pytest
 
-from agents.controllers.base import AWAY, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation
+from agents.controllers.base import (
+    AWAY, DEPARTING, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation,
+)
 from agents.controllers.episode import run_aec_episode, run_gym_episode
 from agents.controllers.fcfs import FCFSController
 from agents.controllers.dispatcher import DispatcherController
@@ -209,6 +211,49 @@ def test_bound_dispatcher_takes_off_on_what_a_trip_needs_not_a_fixed_90_percent(
     assert d.act(obs) == 1
     assert DispatcherController().act(obs) != 1
     env.close()
+
+
+def test_departures_first_option_lets_a_ready_departure_from_a_normal_port_go_first():
+    env = vertiport_v1.env(config="paper")
+    d, default = DispatcherController(yield_margin_pct=20.0), DispatcherController()
+    d.bind(env.unwrapped.sim)
+    default.bind(env.unwrapped.sim)
+    env.close()
+    need = float(d._takeoff_need_pct.max())
+
+    def hovering(battery, to_go=10.0, other_battery=80.0, other_to_go=0.0):
+        # Vehicle 0 hovers at spot 9 with the charger (node 2) free; vehicle 1 is on normal
+        # port 0, charged ``other_battery``, its take-off ``other_to_go`` minutes away.
+        obs = _hold_obs([battery, other_battery], [HOVERING, ON_PORT], {2, 3}, [9, 0])
+        obs["observation"]["evtol_nodes"][:, COL["minutes_to_schedule"]] = [to_go, other_to_go]
+        return obs
+
+    # A turn of hovering (two vehicles in this observation: 2 minutes, 4 %) and the margin, to
+    # spare.
+    full = need + 20.0 + 4.0 + 1.0
+    assert d.act(hovering(full)) == STAY  # the departure goes first
+    assert default.act(hovering(full)) == 4  # off by default: it lands on the charger
+    assert d.act(hovering(full, other_to_go=30.0)) == 4  # none due
+    short = float(d._takeoff_need_pct[0]) - 1.0  # what a take-off from port 0 needs, less 1
+    assert d.act(hovering(full, other_battery=short)) == 4  # not charged for its trip
+    assert d.act(hovering(full - 2.0)) == 4  # too little to spare
+    assert d.act(hovering(full, to_go=-4.0)) == 4  # its landing would be late at its next turn
+    assert DispatcherController(yield_margin_pct=20.0).act(hovering(full)) == 4  # unbound
+
+
+def test_departure_hold_option_raises_a_take_off_need_on_the_charger_per_departing_vehicle():
+    env = vertiport_v1.env(config="paper")
+    d, default = DispatcherController(departure_hold_min=5.0), DispatcherController()
+    d.bind(env.unwrapped.sim)
+    default.bind(env.unwrapped.sim)
+    env.close()
+    obs = _hold_obs([60.0, 90.0, 90.0], [ON_CHARGER, DEPARTING, DEPARTING], set(), [2, 0, 1])
+    base = default._takeoff_need(Observation(obs))
+    assert base == float(d._takeoff_need_pct[2])
+    # Two others departing: 5 minutes of hovering (2 %/min) more for each.
+    assert d._takeoff_need(Observation(obs)) == pytest.approx(base + 2 * 5 * 2.0)
+    on_port = _hold_obs([60.0, 90.0, 90.0], [ON_PORT, DEPARTING, DEPARTING], set(), [0, 1, 2])
+    assert d._takeoff_need(Observation(on_port)) == float(d._takeoff_need_pct[0])  # chargers only
 
 
 def test_bound_dispatcher_counts_turns_in_minutes_where_the_atc_decides_twice_a_minute():

@@ -17,6 +17,23 @@ def test_every_shipped_config_loads(path):
     assert isinstance(cfg, EnvConfig)
 
 
+STUDY_DIR = Path(__file__).resolve().parents[2] / "configs" / "studies"
+STUDY_CONFIGS = sorted(STUDY_DIR.glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", STUDY_CONFIGS, ids=lambda p: p.stem)
+def test_every_study_config_loads(path):
+    assert isinstance(load_config(path), EnvConfig)
+
+
+def test_the_forty_charger_study_gives_every_vehicle_a_charging_port():
+    cfg = load_config(STUDY_DIR / "fleet40_all_pads_charging.yaml")
+    assert cfg.fleet_size == len(cfg.layout.charging_ports_xy_m) == 40
+    assert len(cfg.layout.normal_ports_xy_m) == 0
+    assert cfg.schedule.minutes_per_step == 0.25 and cfg.schedule.episode_steps == 5760
+    assert cfg.battery.hover_drain_pct / cfg.schedule.minutes_per_step == 2.0  # per minute
+
+
 def test_paper_defaults_match_the_paper():
     cfg = load_config("paper")
     assert cfg.fleet_size == 4
