@@ -213,12 +213,18 @@ def test_bound_dispatcher_takes_off_on_what_a_trip_needs_not_a_fixed_90_percent(
     env.close()
 
 
-def test_departures_first_option_lets_a_ready_departure_from_a_normal_port_go_first():
+def _bound_with_and_without(**option) -> tuple[DispatcherController, DispatcherController]:
+    """A dispatcher with ``option`` and one with the defaults, both bound to ``paper``."""
     env = vertiport_v1.env(config="paper")
-    d, default = DispatcherController(yield_margin_pct=20.0), DispatcherController()
-    d.bind(env.unwrapped.sim)
-    default.bind(env.unwrapped.sim)
+    pair = DispatcherController(**option), DispatcherController()
+    for d in pair:
+        d.bind(env.unwrapped.sim)
     env.close()
+    return pair
+
+
+def test_departures_first_option_lets_a_ready_departure_from_a_normal_port_go_first():
+    d, default = _bound_with_and_without(yield_margin_pct=20.0)
     need = float(d._takeoff_need_pct.max())
 
     def hovering(battery, to_go=10.0, other_battery=80.0, other_to_go=0.0):
@@ -242,11 +248,7 @@ def test_departures_first_option_lets_a_ready_departure_from_a_normal_port_go_fi
 
 
 def test_departure_hold_option_raises_a_take_off_need_on_the_charger_per_departing_vehicle():
-    env = vertiport_v1.env(config="paper")
-    d, default = DispatcherController(departure_hold_min=5.0), DispatcherController()
-    d.bind(env.unwrapped.sim)
-    default.bind(env.unwrapped.sim)
-    env.close()
+    d, default = _bound_with_and_without(departure_hold_min=5.0)
     obs = _hold_obs([60.0, 90.0, 90.0], [ON_CHARGER, DEPARTING, DEPARTING], set(), [2, 0, 1])
     base = default._takeoff_need(Observation(obs))
     assert base == float(d._takeoff_need_pct[2])
