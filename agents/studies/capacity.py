@@ -169,6 +169,9 @@ def _analytic(configs: list[str]) -> int:
     print()
     for c in rows:
         print(f"{c.name}: {c.verdict}: {c.reason}")
+    print("\nThe model counts charging ports, energy and turns, not the separation check's holds: "
+          "it calls `wide` and a 40-eVTOL vertiport with a charging port per vehicle carried, yet "
+          "both still lose vehicles (docs/environment.md, sections 8.3 and 8.4).")
     return 0
 
 

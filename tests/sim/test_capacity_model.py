@@ -85,6 +85,7 @@ def test_cli_prints_the_table_and_names_a_broken_config(capsys, tmp_path):
     assert capacity_main(["paper", "paper_overloaded"]) == 0
     out = capsys.readouterr().out
     assert "| `paper` |" in out and "paper_overloaded: overloaded:" in out
+    assert "not the separation check's holds" in out  # what the verdicts do not see
     bad = tmp_path / "bad.yaml"
     bad.write_text("base: paper\nbattery:\n  cruise_drain_scale: -1\n")
     assert capacity_main([str(bad)]) == 2
