@@ -325,8 +325,8 @@ class DispatcherController(Controller):
             return self.trip_battery_pct
         need = float(self._takeoff_need_pct[int(obs.mine("node"))])
         if obs.status == ON_CHARGER and self.departure_hold_min > 0:
-            status = obs.fleet("status").astype(int)
-            departing = int((status == DEPARTING).sum()) - int(status[obs.me] == DEPARTING)
+            # Others departing (the acting vehicle, on its charging port, is not among them).
+            departing = int((obs.fleet("status").astype(int) == DEPARTING).sum())
             need = min(need + self.hover_drain_pct_per_min * self.departure_hold_min * departing,
                        99.0)
         return need

@@ -217,9 +217,10 @@ class Clearance:
         res = self.reservation.tolist()
         if trail and self.trail:
             status = self.status.tolist()
-            waiting = () if self.trail_chains else self.leaders  # empty: no departure counts
+            chains, leaders = self.trail_chains, self.leaders
             return [(u, rid) for u, rid in enumerate(res)
-                    if u != v and rid >= 0 and (status[u] != DEPARTING or (waiting and waiting[u]))]
+                    if u != v and rid >= 0
+                    and (status[u] != DEPARTING or (not chains and leaders[u]))]
         return [(u, rid) for u, rid in enumerate(res) if u != v and rid >= 0]
 
     def _other_rids(self, v: int, trail: bool) -> tuple[int, ...]:
