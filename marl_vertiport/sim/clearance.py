@@ -43,7 +43,8 @@ from marl_vertiport.sim.schema import (
     ARRIVING, AWAY, DEPARTING, HOVERING, LEADING_ACTIONS, OUT_OF_SERVICE, TAXIING,
 )
 from marl_vertiport.sim.volumes import (
-    MEMO_MAX, Volume, VolumeMemo, box, boxes_apart, shared_memo, volume, volumes_clear,
+    MEMO_MAX, TaxiMoves, Volume, VolumeMemo, box, boxes_apart, shared_memo, volume,
+    volumes_clear,
 )
 
 _NODES = LEADING_ACTIONS
@@ -93,6 +94,7 @@ class Clearance:
         self._volume_ids, self._volumes, self._boxes = memo.volume_ids, memo.volumes, memo.boxes
         self._node_ok, self._trip_ok = memo.node_ok, memo.trip_ok
         self._taxi_volumes, self._trip_volumes = memo.taxi_volumes, memo.trip_volumes
+        self._taxi_move_sets = memo.taxi_moves
 
     def _check_memo(self) -> None:
         """Name this simulator's reservations again if another simulator emptied the shared
@@ -275,6 +277,13 @@ class Clearance:
             self._taxi_volumes[node] = vols
         return vols
 
+    def _taxi_moves(self, node: int) -> TaxiMoves:
+        """The moves from ``node`` for the separation check (memoised)."""
+        moves = self._taxi_move_sets.get(node)
+        if moves is None:
+            moves = self._taxi_move_sets[node] = TaxiMoves(self._taxi_volume_list(node))
+        return moves
+
     def _trip_volume(self, node: int, dest: int) -> Volume:
         """Volume of a take-off from port ``node`` for destination ``dest``."""
         key = (node, dest)
@@ -306,14 +315,8 @@ class Clearance:
         key = (node, rid)
         ok = self._node_ok.get(key)
         if ok is None:
-            other, ob = self._volumes[rid], self._boxes[rid]
-            h, vv = self.clear_h_m, self.clear_v_m
-            ok = np.zeros(self.layout.n_nodes, dtype=np.int8)
-            for k, vol in enumerate(self._taxi_volume_list(node)):
-                if not vol:
-                    continue
-                ok[k] = boxes_apart(box(vol), ob, h, vv) or volumes_clear(vol, other, h, vv)
-            ok.setflags(write=False)
+            ok = self._taxi_moves(node).clear_of(self._volumes[rid], self._boxes[rid],
+                                                 self.clear_h_m, self.clear_v_m)
             self._node_ok[key] = ok
         return ok
 

@@ -79,12 +79,70 @@ def segments_clear(s: Segment, t: Segment, h_m: float, v_m: float) -> bool:
     """Whether two segments keep ``v_m`` apart in altitude or ``h_m`` apart in plan view."""
     if s[4] - t[5] >= v_m or t[4] - s[5] >= v_m:
         return True
+    # Plan-view boxes h_m apart along x or y: the segments are at least that far apart.
+    sx0, sx1 = (s[0], s[2]) if s[0] <= s[2] else (s[2], s[0])
+    tx0, tx1 = (t[0], t[2]) if t[0] <= t[2] else (t[2], t[0])
+    if sx0 - tx1 >= h_m or tx0 - sx1 >= h_m:
+        return True
+    sy0, sy1 = (s[1], s[3]) if s[1] <= s[3] else (s[3], s[1])
+    ty0, ty1 = (t[1], t[3]) if t[1] <= t[3] else (t[3], t[1])
+    if sy0 - ty1 >= h_m or ty0 - sy1 >= h_m:
+        return True
     return plan_distance(s, t) >= h_m
 
 
 def volumes_clear(a: Volume, b: Volume, h_m: float, v_m: float) -> bool:
     """Whether every segment of ``a`` is clear of every segment of ``b``."""
     return all(segments_clear(s, t, h_m, v_m) for s in a for t in b)
+
+
+class TaxiMoves:
+    """The moves from one node to every other node, for testing them all against one
+    reservation at once (:meth:`clear_of`): their distinct segments (the climb from the node
+    begins every move, so it is tested once), each move's segments and box, and the box around
+    all of them.
+
+    Args:
+        volumes: by target node, the volume of the move there (``()`` for the node itself).
+    """
+
+    def __init__(self, volumes: list[Volume]) -> None:
+        index: dict[Segment, int] = {}
+        #: ``(target, segment indices, box)`` of each move.
+        self.moves = [(k, tuple([index.setdefault(seg, len(index)) for seg in vol]), box(vol))
+                      for k, vol in enumerate(volumes) if vol]
+        self.segments = list(index)
+        boxes = [b for _, _, b in self.moves]
+        self.around = (min(b[0] for b in boxes), max(b[1] for b in boxes),
+                       min(b[2] for b in boxes), max(b[3] for b in boxes),
+                       min(b[4] for b in boxes), max(b[5] for b in boxes))
+        #: int8 ``(P,)``: 1 at every target (the clearances where nothing is in the way).
+        self.free = np.zeros(len(volumes), dtype=np.int8)
+        self.free[[k for k, _, _ in self.moves]] = 1
+        self.free.setflags(write=False)
+
+    def clear_of(self, other: Volume, other_box: tuple, h_m: float, v_m: float) -> np.ndarray:
+        """Read-only int8 ``(P,)``: 1 where the move to that node clears ``other`` (whose
+        :func:`box` is ``other_box``), as :func:`volumes_clear` with the quick box test."""
+        if boxes_apart(self.around, other_box, h_m, v_m):  # then so is every move's box
+            return self.free
+        seg_ok: list[bool | None] = [None] * len(self.segments)
+        ok = np.zeros(len(self.free), dtype=np.int8)
+        for k, idx, bx in self.moves:
+            if boxes_apart(bx, other_box, h_m, v_m):
+                ok[k] = 1
+                continue
+            for i in idx:
+                clear = seg_ok[i]
+                if clear is None:
+                    seg = self.segments[i]
+                    clear = seg_ok[i] = all(segments_clear(seg, t, h_m, v_m) for t in other)
+                if not clear:
+                    break
+            else:
+                ok[k] = 1
+        ok.setflags(write=False)
+        return ok
 
 
 class VolumeMemo:
@@ -101,6 +159,7 @@ class VolumeMemo:
         self.node_ok: dict[tuple[int, int], np.ndarray] = {}
         self.trip_ok: dict[tuple[int, int, int], bool] = {}
         self.taxi_volumes: dict[int, list[Volume]] = {}
+        self.taxi_moves: dict[int, TaxiMoves] = {}
         self.trip_volumes: dict[tuple[int, int], Volume] = {}
         self.lifted: dict[tuple[int, int, bool], int] = {}
         self.pair_ok: dict[tuple[int, int], bool] = {}

@@ -10,7 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from marl_vertiport.config import load_config, with_rules
-from marl_vertiport.sim.volumes import plan_distance, volume, volumes_clear
+from marl_vertiport.sim.volumes import (
+    TaxiMoves, box, boxes_apart, plan_distance, segments_clear, volume, volumes_clear,
+)
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.invariants import violations
 from marl_vertiport.sim.schema import (
@@ -75,6 +77,40 @@ def test_layers_four_metres_apart_and_a_move_above_a_parked_vehicle_are_clear():
     assert not volumes_clear(climb, at4, h, v)  # 3.9 m beside a climb through 4 m
     assert volumes_clear(volume((5.0, 4.1, 0.15), [(5.0, 4.1, 8.0)], 2.0, 0.15), at4, h, v)
     assert plan_distance((0, 0, 10, 0, 0, 0), (5, -5, 5, 5, 0, 0)) == 0.0  # crossing
+
+
+_coord = st.integers(-80, 80).map(lambda k: k / 4.0)  # metres, on a quarter-metre grid
+_point = st.tuples(_coord, _coord, st.integers(1, 48).map(lambda k: k / 4.0))
+_route = st.lists(_point, min_size=0, max_size=3)
+
+
+@settings(max_examples=300, deadline=None)
+@given(a=_point, b=_route, c=_point, d=_route)
+def test_segments_clear_is_the_separation_thresholds_per_axis(a, b, c, d):
+    """The quick plan-view box test inside segments_clear never changes its answer: two segments
+    are clear when their altitude ranges or their plan-view projections are far enough apart."""
+    h, v = 4.0, 3.5
+    for s in volume(a, b, 2.0, 0.15):
+        for t in volume(c, d, 2.0, 0.15):
+            apart = s[4] - t[5] >= v or t[4] - s[5] >= v or plan_distance(s, t) >= h
+            assert segments_clear(s, t, h, v) == apart
+
+
+@settings(max_examples=150, deadline=None)
+@given(start=_point, targets=st.lists(_route, min_size=1, max_size=6), c=_point, d=_route)
+def test_moves_tested_at_once_clear_a_reservation_exactly_where_each_does(start, targets, c, d):
+    """TaxiMoves.clear_of, which tests each distinct segment once, says what the box test and
+    volumes_clear say of each move on its own; the node itself (no move) is never cleared."""
+    h, v = 4.0, 3.5
+    vols = [volume(start, route, 2.0, 0.15) if route else () for route in targets]
+    other = volume(c, d, 2.0, 0.15)
+    ok = TaxiMoves(vols).clear_of(other, box(other), h, v) if any(vols) else None
+    for k, vol in enumerate(vols):
+        if ok is None:
+            break
+        expect = bool(vol) and (boxes_apart(box(vol), box(other), h, v)
+                                or volumes_clear(vol, other, h, v))
+        assert ok[k] == expect
 
 
 # ------------------------------------------------------------------ hand-built situations
