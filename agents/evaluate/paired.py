@@ -16,7 +16,8 @@ bootstrap_ci`, resampling days)::
 Each ``--pair BASE CANDIDATE`` gives a row; with several pairs (one per training seed, say) a
 last row pools all their days. Beside the reward each row gives what the reward can hide: the
 vehicles lost in the air and on the ground and the unresolved conflicts (the paper's S = -5,
-counted as collisions) a day, base → candidate, and the mean difference per case.
+counted as collisions) a day, base → candidate, and per case the mean difference with its
+95 % interval (the same bootstrap over that case's days).
 
 *Unforced losses* say which of those losses a controller could have avoided: on each day, the
 vehicles it lost beyond the fewest any agent of a reference set lost on that day
@@ -106,7 +107,7 @@ def compare(episodes: dict[str, dict[Day, dict[str, float]]],
     """One row per pair (and a pooled row ``"all"`` for several pairs): the days both agents
     played, each one's mean reward, the mean paired difference with its 95 % bootstrap CI,
     lost vehicles (air, ground) and unresolved conflicts a day of each, and the mean
-    difference per case (``by_case``). With a ``reference`` set of agents, also each side's
+    difference per case (``by_case``) and its interval (``by_case_ci``). With a ``reference`` set of agents, also each side's
     unforced losses a day (:func:`unforced_losses`) over the days a reference agent played
     (``reference_days``; ``None`` where there is none)."""
     for agent in reference:
@@ -148,8 +149,10 @@ def _row(label: str, played: list[tuple[str, str, Day]],
     diff = np.array([c["total_reward"] - b["total_reward"] for b, c, _ in days])
     low, high = bootstrap_ci(diff)
     cases = sorted({day[0] for _, _, day in days})
-    by_case = {case: float(np.mean([c["total_reward"] - b["total_reward"]
-                                    for b, c, day in days if day[0] == case])) for case in cases}
+    case_diff = {case: [c["total_reward"] - b["total_reward"] for b, c, day in days
+                        if day[0] == case] for case in cases}
+    by_case = {case: float(np.mean(d)) for case, d in case_diff.items()}
+    by_case_ci = {case: bootstrap_ci(d) for case, d in case_diff.items()}
     return {"pair": label, "days": len(days), "base": mean(0, "total_reward"),
             "candidate": mean(1, "total_reward"), "difference": float(diff.mean()),
             "ci_low": low, "ci_high": high,
@@ -158,7 +161,7 @@ def _row(label: str, played: list[tuple[str, str, Day]],
             "reference_days": len(unforced),
             "unforced_base": float(np.mean([u[0] for u in unforced])) if unforced else None,
             "unforced_candidate": float(np.mean([u[1] for u in unforced])) if unforced else None,
-            "by_case": by_case}
+            "by_case": by_case, "by_case_ci": by_case_ci}
 
 
 def markdown(rows: list[dict[str, Any]], reference: Sequence[str] = ()) -> str:
@@ -178,21 +181,34 @@ def markdown(rows: list[dict[str, Any]], reference: Sequence[str] = ()) -> str:
                  f"{r['stranded_air_base']:.2f} / {r['stranded_ground_base']:.2f} → "
                  f"{r['stranded_air_candidate']:.2f} / {r['stranded_ground_candidate']:.2f}",
                  unforced, f"{r['collisions_base']:.2f} → {r['collisions_candidate']:.2f}",
-                 *(f"{r['by_case'][c]:+.0f}" if c in r["by_case"] else "" for c in cases)]
+                 *(_case_cell(r, c) for c in cases)]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _case_cell(row: dict[str, Any], case: str) -> str:
+    """The mean paired difference of one case and its 95 % CI, or nothing."""
+    if case not in row["by_case"]:
+        return ""
+    low, high = row["by_case_ci"][case]
+    return f"{row['by_case'][case]:+.0f} [{low:+.0f}, {high:+.0f}]"
 
 
 def csv_text(rows: list[dict[str, Any]]) -> str:
     import io
 
     cases = sorted({c for r in rows for c in r["by_case"]})
-    keys = [k for k in rows[0] if k != "by_case"]
+    keys = [k for k in rows[0] if k not in ("by_case", "by_case_ci")]
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(keys + [f"difference_{c}" for c in cases])
+    writer.writerow(keys + [f"{col}_{c}" for c in cases
+                            for col in ("difference", "ci_low", "ci_high")])
     for r in rows:
-        writer.writerow([r[k] for k in keys] + [r["by_case"].get(c, "") for c in cases])
+        per_case = []
+        for c in cases:
+            ci = r["by_case_ci"].get(c, ("", ""))
+            per_case += [r["by_case"].get(c, ""), ci[0], ci[1]]
+        writer.writerow([r[k] for k in keys] + per_case)
     return buf.getvalue()
 
 

@@ -36,6 +36,7 @@ def test_paired_difference_is_per_day_and_pools_pairs(tmp_path):
     row, = compare(data, [("a", "b")])
     assert row["days"] == 8 and row["difference"] == pytest.approx(10.0)
     assert row["by_case"] == {"paper": pytest.approx(30.0), "wide": pytest.approx(-10.0)}
+    assert row["by_case_ci"]["paper"] == pytest.approx((30.0, 30.0))  # the same gain every day
     assert row["ci_low"] <= 10.0 <= row["ci_high"] and row["ci_low"] < row["ci_high"]
     assert row["stranded_ground_base"] == 1.0 and row["stranded_ground_candidate"] == 1.5
     rows = compare(data, [("a", "b"), ("b", "a")])
@@ -50,6 +51,8 @@ def test_cli_prints_the_table_and_writes_the_csv(tmp_path, capsys):
     assert "| a → b | 8 |" in table and "+10 [" in table and "0.00 / 1.00 → 0.00 / 1.50" in table
     rows = list(csv.DictReader(out.open()))
     assert rows[0]["difference_paper"] == "30.0" and rows[0]["days"] == "8"
+    assert rows[0]["ci_low_wide"] == rows[0]["ci_high_wide"] == "-10.0"
+    assert "+30 [+30, +30] | -10 [-10, -10] |" in table  # each case with its interval
 
 
 @pytest.mark.parametrize("pair, message", [
