@@ -107,9 +107,9 @@ def compare(episodes: dict[str, dict[Day, dict[str, float]]],
     """One row per pair (and a pooled row ``"all"`` for several pairs): the days both agents
     played, each one's mean reward, the mean paired difference with its 95 % bootstrap CI,
     lost vehicles (air, ground) and unresolved conflicts a day of each, and the mean
-    difference per case (``by_case``) and its interval (``by_case_ci``). With a ``reference`` set of agents, also each side's
-    unforced losses a day (:func:`unforced_losses`) over the days a reference agent played
-    (``reference_days``; ``None`` where there is none)."""
+    difference per case (``by_case``) and its interval (``by_case_ci``). With a ``reference``
+    set of agents, also each side's unforced losses a day (:func:`unforced_losses`) over the
+    days a reference agent played (``reference_days``; ``None`` where there is none)."""
     for agent in reference:
         if agent not in episodes:
             raise PairedInputError(f"reference agent {agent!r} is in none of the files (they "

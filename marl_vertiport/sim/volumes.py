@@ -113,9 +113,10 @@ class TaxiMoves:
                       for k, vol in enumerate(volumes) if vol]
         self.segments = list(index)
         boxes = [b for _, _, b in self.moves]
+        #: The box around every move (``None`` where there is no move).
         self.around = (min(b[0] for b in boxes), max(b[1] for b in boxes),
                        min(b[2] for b in boxes), max(b[3] for b in boxes),
-                       min(b[4] for b in boxes), max(b[5] for b in boxes))
+                       min(b[4] for b in boxes), max(b[5] for b in boxes)) if boxes else None
         #: int8 ``(P,)``: 1 at every target (the clearances where nothing is in the way).
         self.free = np.zeros(len(volumes), dtype=np.int8)
         self.free[[k for k, _, _ in self.moves]] = 1
@@ -124,7 +125,8 @@ class TaxiMoves:
     def clear_of(self, other: Volume, other_box: tuple, h_m: float, v_m: float) -> np.ndarray:
         """Read-only int8 ``(P,)``: 1 where the move to that node clears ``other`` (whose
         :func:`box` is ``other_box``), as :func:`volumes_clear` with the quick box test."""
-        if boxes_apart(self.around, other_box, h_m, v_m):  # then so is every move's box
+        if self.around is None or boxes_apart(self.around, other_box, h_m, v_m):
+            # No move, or every move's box is as far apart as the box around them.
             return self.free
         seg_ok: list[bool | None] = [None] * len(self.segments)
         ok = np.zeros(len(self.free), dtype=np.int8)
