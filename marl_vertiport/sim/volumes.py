@@ -112,11 +112,9 @@ class TaxiMoves:
         self.moves = [(k, tuple([index.setdefault(seg, len(index)) for seg in vol]), box(vol))
                       for k, vol in enumerate(volumes) if vol]
         self.segments = list(index)
-        boxes = [b for _, _, b in self.moves]
-        #: The box around every move (``None`` where there is no move).
-        self.around = (min(b[0] for b in boxes), max(b[1] for b in boxes),
-                       min(b[2] for b in boxes), max(b[3] for b in boxes),
-                       min(b[4] for b in boxes), max(b[5] for b in boxes)) if boxes else None
+        #: The box around every move: that of all their segments (``None`` where there is no
+        #: move).
+        self.around = box(tuple(self.segments)) if self.segments else None
         #: int8 ``(P,)``: 1 at every target (the clearances where nothing is in the way).
         self.free = np.zeros(len(volumes), dtype=np.int8)
         self.free[[k for k, _, _ in self.moves]] = 1
