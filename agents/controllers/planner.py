@@ -23,11 +23,13 @@ a day against about 170 for rollouts with the uncertainties).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
 from agents.controllers.base import Controller
 from agents.controllers.dispatcher import DispatcherController
+from marl_vertiport.config import EnvConfig
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT, OUT_OF_SERVICE
 from marl_vertiport.sim.layout import HOVER_SPOT
@@ -36,6 +38,44 @@ from marl_vertiport.spaces import ObservationBuilder
 
 def _none(_v: int) -> None:
     return None
+
+
+def nominal_config(cfg: EnvConfig) -> EnvConfig:
+    """``cfg`` without its uncertainties: no wind gusts, charger or take-off failures,
+    observation noise or action misreads (the model a certainty-equivalent planner rolls out)."""
+    return dataclasses.replace(cfg, uncertainty=dataclasses.replace(
+        cfg.uncertainty, wind_gust_prob=0.0, charger_failure_prob=0.0,
+        takeoff_failure_prob=0.0, position_noise_mean_m=0.0, position_noise_std_m=0.0,
+        action_misread_prob=0.0))
+
+
+def roll_out(scratch: VertiportSim, builder: ObservationBuilder, base: Controller,
+             snap: dict, action: int, steps: int, rng: np.random.Generator,
+             watch: Callable[[VertiportSim], None] | None = None) -> float:
+    """Simulate ``action`` from the episode state ``snap`` in ``scratch``, then ``base`` for the
+    whole fleet for ``steps - 1`` more steps (fewer at the end of the day); return the sum of
+    the acting vehicles' rewards. ``scratch`` holds the end state afterwards; the future is
+    drawn from ``rng``; ``watch(scratch)`` runs after every step.
+
+    When ``base.act`` is a pure function of the observation (``pure_act``), a turn with a single
+    legal action takes that action without asking it: it could return nothing else, and no state
+    or generator of its own is skipped."""
+    single = scratch.single_legal_action if getattr(base, "pure_act", False) else _none
+    scratch.restore(snap)
+    scratch.rng = rng
+    total, _ = scratch.step(action)
+    if watch is not None:
+        watch(scratch)
+    for _ in range(steps - 1):
+        if scratch.truncated:
+            break
+        v = scratch.acting
+        only = single(v)
+        reward, _ = scratch.step(base.act(builder.observe(v)) if only is None else only)
+        total += reward
+        if watch is not None:
+            watch(scratch)
+    return total
 
 
 class RolloutPlanner(Controller):
@@ -97,12 +137,7 @@ class RolloutPlanner(Controller):
     def bind(self, sim: VertiportSim) -> None:
         """Plan for the env whose simulator is ``sim`` (a scratch copy is built once per config,
         without its uncertainties when ``nominal``)."""
-        cfg = sim.cfg
-        if self.nominal:
-            cfg = dataclasses.replace(cfg, uncertainty=dataclasses.replace(
-                cfg.uncertainty, wind_gust_prob=0.0, charger_failure_prob=0.0,
-                takeoff_failure_prob=0.0, position_noise_mean_m=0.0, position_noise_std_m=0.0,
-                action_misread_prob=0.0))
+        cfg = nominal_config(sim.cfg) if self.nominal else sim.cfg
         if self._scratch is None or self._scratch.cfg != cfg:
             if self._scratch is not None:
                 self._scratch.close()
@@ -142,28 +177,15 @@ class RolloutPlanner(Controller):
         return actions
 
     def _simulate(self, sim: VertiportSim, actions: list[int]) -> dict[int, float]:
-        """The value of each of ``actions`` (see :meth:`q_values`).
-
-        When the base controller's ``act`` is a pure function of the observation
-        (``pure_act``), a rollout turn with a single legal action takes that action without
-        asking it: it could return nothing else, and no state or generator of its own is
-        skipped."""
+        """The value of each of ``actions`` (see :meth:`q_values`; each rollout is
+        :func:`roll_out`)."""
         scratch, builder, base = self._scratch, self._builder, self.base
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
         q: dict[int, float] = {}
-        single = scratch.single_legal_action if getattr(base, "pure_act", False) else _none
         for a in actions:
-            scratch.restore(snap)
-            scratch.rng = np.random.default_rng((self.seed, sim.step_count))
-            total, _ = scratch.step(a)
-            for _ in range(self.horizon - 1):
-                if scratch.truncated:
-                    break
-                v = scratch.acting
-                only = single(v)
-                reward, _ = scratch.step(base.act(builder.observe(v)) if only is None else only)
-                total += reward
+            total = roll_out(scratch, builder, base, snap, a, self.horizon,
+                             np.random.default_rng((self.seed, sim.step_count)))
             stranded = self.stranded(scratch) - self.stranded(sim)
             q[a] = total + self.terminal_value(scratch) - self.stranding_penalty * stranded
         return q

@@ -1,5 +1,6 @@
 """Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``,
-``rollout`` (the look-ahead planner, which reads the simulator), ``gcn``
+``rollout`` (the look-ahead planner, which reads the simulator), ``guard`` (a controller,
+the dispatcher by default, with a look-ahead guard against lost vehicles), ``gcn``
 (the shipped trained policy), ``package.module:Class`` or ``path/to/file.py:Class`` (a class,
 or a ready object; modules and files resolve from the working directory, as under
 ``python -m``), the path
@@ -27,6 +28,7 @@ BUILTIN = {
     "fcfs": "agents.controllers.fcfs:FCFSController",
     "heuristic": "agents.controllers.dispatcher:DispatcherController",
     "rollout": "agents.controllers.planner:RolloutPlanner",
+    "guard": "agents.controllers.guard:GuardedController",
 }
 
 

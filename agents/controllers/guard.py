@@ -1,0 +1,194 @@
+"""A look-ahead guard against lost vehicles, around any controller (a shield).
+
+The base controller (the dispatcher by default) decides; the guard only vetoes. At a decision
+that matters (the acting vehicle on a port, on a charger or hovering, with more than one legal
+action) it simulates the base's choice, then the base for the whole fleet, over the next
+``horizon_min`` minutes, ``samples`` times, in a copy of the simulator
+(:meth:`VertiportSim.snapshot` / :meth:`~VertiportSim.restore`) that draws the config's
+uncertainties (wind gusts, charger and take-off failures) from generators of its own:
+
+* if no rollout loses a vehicle (``sim.lost``), the base's choice stands;
+* if one does, every legal action of the acting vehicle is simulated the same way, with the
+  same draws for every action (common random numbers), and the action with the fewest
+  vehicles lost on average is taken: the base's choice where it ties for the fewest, else the
+  one whose rollouts earn the most reward.
+
+A check that loses no vehicle and in which no live vehicle's charge falls below ``quiet_pct``
+lets the guard skip the checks of the next ``quiet_min`` minutes: most of a day is far from a
+loss, and the checks cost the rollouts.
+
+Unlike :class:`agents.controllers.planner.RolloutPlanner`, which replaces the base's choice
+whenever another action earns more reward (and under uncertainty loses more vehicles than the
+dispatcher, docs/training.md), the guard changes a decision only to lose fewer vehicles, so it
+keeps the base's margins everywhere else. It is model-based: it reads the simulator's true
+state (bind it with :meth:`GuardedController.bind`, as the episode runners of
+:mod:`agents.controllers.episode` do).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from agents.controllers.base import Controller
+from agents.controllers.planner import nominal_config, roll_out
+from marl_vertiport.sim.core import VertiportSim
+from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
+from marl_vertiport.spaces import ObservationBuilder
+
+
+class GuardedController(Controller):
+    """The base controller's decisions, changed only where a look-ahead finds that they lose a
+    vehicle and another legal action loses fewer.
+
+    Args:
+        base: the controller guarded: an agent spec (``"heuristic"``, default) or a controller
+            object. Its ``act`` should be cheap: the rollouts call it at every simulated turn.
+        horizon_min: minutes simulated per rollout, the decision's own step included.
+        samples: rollouts per action; each draws the uncertainties from its own generator (one
+            where the config has none).
+        nominal: roll out without the config's uncertainties (and so once per action).
+        quiet_pct: a clean check in which every live vehicle keeps at least this charge (%)
+            skips the checks of the next ``quiet_min`` minutes (above 100: never skip).
+        quiet_min: minutes of skipped checks after a quiet check.
+        seed: seed of the rollouts' generators, combined with the episode's seed, the step and
+            the sample.
+    """
+
+    name = "guard"
+
+    def __init__(self, base: str | Any = "heuristic", horizon_min: float = 120.0,
+                 samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
+                 quiet_min: float = 10.0, seed: int = 0) -> None:
+        if horizon_min <= 0:
+            raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
+        if samples < 1:
+            raise ValueError(f"samples must be >= 1, got {samples}")
+        if quiet_min < 0:
+            raise ValueError(f"quiet_min must be >= 0 minutes, got {quiet_min}")
+        if isinstance(base, str):
+            from agents.controllers.registry import make_controller
+
+            base = make_controller(base)
+        self.base = base
+        self.horizon_min = float(horizon_min)
+        self.samples = int(samples)
+        self.nominal = bool(nominal)
+        self.quiet_pct = float(quiet_pct)
+        self.quiet_min = float(quiet_min)
+        self.seed = int(seed)
+        self.sim: VertiportSim | None = None
+        self._scratch: VertiportSim | None = None
+        self._builder: ObservationBuilder | None = None
+        self._episode_seed = 0
+        self._runs = self.samples
+        self._quiet_until_step = -1
+        #: Per action of the last decision that ran the full comparison: (mean vehicles lost,
+        #: mean reward) over its rollouts; empty where the base's choice stood unchallenged.
+        self.last_values: dict[int, tuple[float, float]] = {}
+        #: This episode's decisions checked by rollouts, and decisions changed.
+        self.checks = 0
+        self.changes = 0
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed: int | None = None) -> None:
+        self._episode_seed = 0 if seed is None else int(seed)
+        self._quiet_until_step = -1
+        self.last_values = {}
+        self.checks = self.changes = 0
+        if hasattr(self.base, "reset"):
+            self.base.reset(seed=seed)
+
+    def bind(self, sim: VertiportSim) -> None:
+        """Guard the env whose simulator is ``sim`` (a scratch copy is built once per config,
+        without its uncertainties when ``nominal``; a config without uncertainties, or
+        ``nominal``, is rolled out once per action)."""
+        cfg = nominal_config(sim.cfg) if self.nominal else sim.cfg
+        # Without uncertainties every rollout of an action is the same: one is enough.
+        self._runs = 1 if cfg == nominal_config(cfg) else self.samples
+        if self._scratch is None or self._scratch.cfg != cfg:
+            if self._scratch is not None:
+                self._scratch.close()
+            self._scratch = VertiportSim(cfg)
+            self._builder = ObservationBuilder(self._scratch)
+        if hasattr(self.base, "bind"):  # the base adopts the env's energy model
+            self.base.bind(self._scratch)
+        self.sim = sim
+
+    def close(self) -> None:
+        if self._scratch is not None:
+            self._scratch.close()
+            self._scratch = None
+        if hasattr(self.base, "close"):
+            self.base.close()
+
+    # ------------------------------------------------------------------ rollouts
+    def horizon_steps(self, sim: VertiportSim) -> int:
+        """Steps a rollout simulates: ``horizon_min`` in the env's minutes per step (at least 1)."""
+        return max(1, int(round(self.horizon_min / sim.cfg.schedule.minutes_per_step)))
+
+    def evaluate(self, sim: VertiportSim, actions: list[int],
+                 stop_at_loss: bool = False) -> tuple[dict[int, tuple[float, float]], float]:
+        """Per action, the mean over its rollouts of the vehicles lost (beyond those already
+        lost) and of the reward; and the least charge (%) of a live vehicle seen in any rollout
+        step. ``stop_at_loss``: stop an action's rollouts at the first that loses a vehicle
+        (its means are then over the rollouts run)."""
+        scratch, builder = self._scratch, self._builder
+        assert scratch is not None and builder is not None
+        snap = sim.snapshot()
+        steps = self.horizon_steps(sim)
+        lost_before = int(np.count_nonzero(sim.lost))
+        least = [100.0]
+
+        def watch(s: VertiportSim) -> None:
+            live = ~s.lost
+            if live.any():
+                least[0] = min(least[0], float(s.battery[live].min()))
+
+        values: dict[int, tuple[float, float]] = {}
+        for a in actions:
+            lost = reward = 0.0
+            runs = 0
+            for k in range(self._runs):
+                rng = np.random.default_rng((self.seed, self._episode_seed, sim.step_count, k))
+                reward += roll_out(scratch, builder, self.base, snap, a, steps, rng, watch)
+                lost += int(np.count_nonzero(scratch.lost)) - lost_before
+                runs += 1
+                if stop_at_loss and lost > 0:
+                    break
+            values[a] = (lost / runs, reward / runs)
+        return values, least[0]
+
+    # ------------------------------------------------------------------ decisions
+    def act(self, observation: dict) -> int:
+        sim = self.sim
+        if sim is None:
+            raise RuntimeError("GuardedController needs the simulator: call bind(env.unwrapped.sim) "
+                               "first (the episode runners of agents.controllers.episode do)")
+        choice = int(self.base.act(observation))
+        self.last_values = {}
+        v = sim.acting
+        if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING) or sim.step_count < self._quiet_until_step:
+            return choice
+        if not np.array_equal(observation["action_mask"], sim.action_mask(v)):
+            raise RuntimeError("GuardedController: the observation is not that of the bound env's "
+                               "acting vehicle")
+        legal = np.flatnonzero(observation["action_mask"]).tolist()
+        if len(legal) < 2:
+            return choice
+        self.checks += 1
+        first, least = self.evaluate(sim, [choice], stop_at_loss=True)
+        if first[choice][0] == 0:
+            if least >= self.quiet_pct:
+                self._quiet_until_step = sim.step_count + int(
+                    round(self.quiet_min / sim.cfg.schedule.minutes_per_step))
+            return choice
+        values, _ = self.evaluate(sim, legal if choice in legal else [*legal, choice])
+        self.last_values = values
+        fewest = min(lost for lost, _ in values.values())
+        if values[choice][0] <= fewest:
+            return choice
+        best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][1])
+        self.changes += 1
+        return int(best)

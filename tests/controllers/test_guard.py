@@ -1,0 +1,126 @@
+"""The look-ahead guard: it leaves the real env untouched, acts legally, keeps the base's choice
+unless that choice loses a vehicle, and then takes an action that loses fewer."""
+
+import numpy as np
+import pytest
+
+from agents.controllers.base import HOVER_SPOT, HOVERING, Observation
+from agents.controllers.dispatcher import DispatcherController
+from agents.controllers.episode import run_episode
+from agents.controllers.guard import GuardedController
+from agents.controllers.registry import make_controller
+from marl_vertiport import vertiport_v1
+from marl_vertiport.gym_env import VertiportEnv
+
+
+class _KeepsHolding(DispatcherController):
+    """The dispatcher, except that a hovering vehicle moves on to a hover spot whenever one is
+    legal: it holds until the energy check forces it down, short of charge, and the fleet
+    loses vehicles the dispatcher would keep."""
+
+    def act(self, observation: dict) -> int:
+        obs = Observation(observation)
+        if obs.status == HOVERING:
+            for node in np.flatnonzero(obs.ports("type") == HOVER_SPOT):
+                if obs.mask[obs.go_to(node)]:
+                    return obs.go_to(node)
+        return super().act(observation)
+
+
+def test_guard_keeps_the_vehicles_its_base_loses():
+    env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 240})
+    lost = {"base": 0, "guard": 0}
+    changes = 0
+    for seed in range(3):
+        lost["base"] += run_episode(env, _KeepsHolding(), seed=seed)["stranded"]
+        guard = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True)
+        lost["guard"] += run_episode(env, guard, seed=seed)["stranded"]
+        changes += guard.changes
+        guard.close()
+    env.close()
+    assert lost["base"] >= 6 and lost["guard"] <= lost["base"] - 4
+    assert changes > 0
+
+
+def test_guard_compares_every_legal_action_when_the_base_loses_one():
+    env = vertiport_v1.env(config="paper")
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    guard = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True)
+    guard.reset(seed=0)
+    guard.bind(sim)
+    for _ in range(240):
+        agent = env.agent_selection
+        obs = env.observe(agent)
+        before = sim.snapshot()
+        action = guard.act(obs)
+        assert obs["action_mask"][action] == 1
+        after = sim.snapshot()
+        for key in ("pos", "battery", "status", "node_occupant", "pending_time"):
+            np.testing.assert_array_equal(before[key], after[key])  # the env is untouched
+        assert before["rng"].bit_generator.state == after["rng"].bit_generator.state
+        if guard.last_values:  # a full comparison: every legal action, the base's losing one
+            assert set(guard.last_values) == set(np.flatnonzero(obs["action_mask"]).tolist())
+            base_lost = guard.last_values[guard.base.act(obs)][0]
+            assert base_lost > 0 and guard.last_values[action][0] == min(
+                lost for lost, _ in guard.last_values.values())
+        env.step(action)
+    assert guard.changes > 0
+    guard.close()
+    env.close()
+
+
+def test_guard_keeps_the_base_choice_and_goes_quiet():
+    env = VertiportEnv("paper")
+    obs, _ = env.reset(seed=4)
+    guard = GuardedController(horizon_min=10, samples=1, nominal=True, quiet_pct=0.0,
+                              quiet_min=5.0)
+    guard.reset(seed=4)
+    guard.bind(env.sim)
+    base = DispatcherController()
+    base.bind(env.sim)
+    checked_at = []
+    for _ in range(30):
+        checks = guard.checks
+        action = guard.act(obs)
+        assert action == base.act(obs)  # nothing is lost in the first half hour
+        if guard.checks > checks:
+            checked_at.append(env.sim.step_count)
+        obs, *_ = env.step(action)
+    assert guard.changes == 0 and checked_at
+    # Every check is quiet (no charge falls below 0 %): the next is at least 5 minutes later.
+    assert np.all(np.diff(checked_at) >= 5)
+    env.close()
+    guard.close()
+
+
+def test_guarded_dispatcher_loses_fewer_vehicles_than_the_dispatcher():
+    """Validation day 800029 at 10 % uncertainty, its first 8 hours: the dispatcher loses
+    vehicles in a queue for the one charging port; the guard keeps them."""
+    env = vertiport_v1.env(config="paper_uncertain_10", **{"schedule.episode_steps": 480})
+    lost = {name: run_episode(env, make_controller(name), seed=800029)["stranded"]
+            for name in ("heuristic", "guard")}
+    env.close()
+    assert lost["heuristic"] >= 2
+    assert lost["guard"] < lost["heuristic"]
+
+
+def test_arguments_and_unbound_use():
+    with pytest.raises(RuntimeError, match="bind"):
+        GuardedController().act({"action_mask": np.ones(14, np.int8)})
+    with pytest.raises(ValueError, match="horizon_min"):
+        GuardedController(horizon_min=0)
+    with pytest.raises(ValueError, match="samples"):
+        GuardedController(samples=0)
+    with pytest.raises(ValueError, match="quiet_min"):
+        GuardedController(quiet_min=-1)
+    assert make_controller("guard").name == "guard"
+    for config, runs in (("paper", 1), ("paper_uncertain", 4)):  # one where all runs are alike
+        env = vertiport_v1.env(config=config)
+        guard = GuardedController(samples=4)
+        guard.bind(env.unwrapped.sim)
+        assert guard._runs == runs
+        guard.close()
+        env.close()
+    assert make_controller("guard[samples=2]").samples == 2
+    assert isinstance(make_controller("guard[base=fcfs]").base, make_controller("fcfs").__class__)
