@@ -9,9 +9,11 @@ uncertainties (wind gusts, charger and take-off failures) from generators of its
 
 * if no rollout loses a vehicle (``sim.lost``), the base's choice stands;
 * if one does, every legal action of the acting vehicle is simulated the same way, with the
-  same draws for every action (common random numbers), and the action with the fewest
-  vehicles lost on average is taken: the base's choice where it ties for the fewest, else the
-  one whose rollouts earn the most reward.
+  same draws for every action (common random numbers). If the base's choice loses at least
+  ``min_lost`` vehicles on average over its rollouts (half a vehicle by default: a loss in at
+  least half of them), the action with the fewest vehicles lost on average is taken: the
+  base's choice where it ties for the fewest, else the one whose rollouts earn the most
+  reward.
 
 A check that loses no vehicle and in which no live vehicle's charge falls below ``quiet_pct``
 lets the guard skip the checks of the next ``quiet_min`` minutes: most of a day is far from a
@@ -52,6 +54,8 @@ class GuardedController(Controller):
         quiet_pct: a clean check in which every live vehicle keeps at least this charge (%)
             skips the checks of the next ``quiet_min`` minutes (above 100: never skip).
         quiet_min: minutes of skipped checks after a quiet check.
+        min_lost: vehicles the base's choice must lose on average over its rollouts for the
+            guard to change it (with one rollout per action, any loss).
         seed: seed of the rollouts' generators, combined with the episode's seed, the step and
             the sample.
     """
@@ -60,13 +64,15 @@ class GuardedController(Controller):
 
     def __init__(self, base: str | Any = "heuristic", horizon_min: float = 120.0,
                  samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
-                 quiet_min: float = 10.0, seed: int = 0) -> None:
+                 quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
         if quiet_min < 0:
             raise ValueError(f"quiet_min must be >= 0 minutes, got {quiet_min}")
+        if min_lost <= 0:
+            raise ValueError(f"min_lost must be > 0 vehicles, got {min_lost}")
         if isinstance(base, str):
             from agents.controllers.registry import make_controller
 
@@ -78,6 +84,7 @@ class GuardedController(Controller):
         self.quiet_pct = float(quiet_pct)
         self.quiet_min = float(quiet_min)
         self.seed = int(seed)
+        self.min_lost = float(min_lost)
         self.sim: VertiportSim | None = None
         self._scratch: VertiportSim | None = None
         self._builder: ObservationBuilder | None = None
@@ -187,7 +194,7 @@ class GuardedController(Controller):
         values, _ = self.evaluate(sim, legal if choice in legal else [*legal, choice])
         self.last_values = values
         fewest = min(lost for lost, _ in values.values())
-        if values[choice][0] <= fewest:
+        if values[choice][0] <= fewest or values[choice][0] < self.min_lost:
             return choice
         best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][1])
         self.changes += 1

@@ -62,7 +62,7 @@ def test_guard_compares_every_legal_action_when_the_base_loses_one():
         if guard.last_values:  # a full comparison: every legal action, the base's losing one
             assert set(guard.last_values) == set(np.flatnonzero(obs["action_mask"]).tolist())
             base_lost = guard.last_values[guard.base.act(obs)][0]
-            assert base_lost > 0 and guard.last_values[action][0] == min(
+            assert base_lost >= guard.min_lost and guard.last_values[action][0] == min(
                 lost for lost, _ in guard.last_values.values())
         env.step(action)
     assert guard.changes > 0
@@ -114,6 +114,8 @@ def test_arguments_and_unbound_use():
         GuardedController(samples=0)
     with pytest.raises(ValueError, match="quiet_min"):
         GuardedController(quiet_min=-1)
+    with pytest.raises(ValueError, match="min_lost"):
+        GuardedController(min_lost=0)
     assert make_controller("guard").name == "guard"
     for config, runs in (("paper", 1), ("paper_uncertain", 4)):  # one where all runs are alike
         env = vertiport_v1.env(config=config)
