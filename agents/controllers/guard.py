@@ -34,13 +34,13 @@ from typing import Any
 import numpy as np
 
 from agents.controllers.base import Controller
-from agents.controllers.planner import nominal_config, roll_out
+from agents.controllers.planner import ScratchRollouts, nominal_config, roll_out
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
 from marl_vertiport.spaces import ObservationBuilder
 
 
-class GuardedController(Controller):
+class GuardedController(ScratchRollouts, Controller):
     """The base controller's decisions, changed only where a look-ahead finds that they lose a
     vehicle and another legal action loses fewer.
 
@@ -108,25 +108,15 @@ class GuardedController(Controller):
             self.base.reset(seed=seed)
 
     def bind(self, sim: VertiportSim) -> None:
-        """Guard the env whose simulator is ``sim`` (a scratch copy is built once per config,
-        without its uncertainties when ``nominal``; a config without uncertainties, or
-        ``nominal``, is rolled out once per action)."""
-        cfg = nominal_config(sim.cfg) if self.nominal else sim.cfg
+        """Guard the env whose simulator is ``sim`` (:class:`ScratchRollouts`); a config
+        without uncertainties, or ``nominal``, is rolled out once per action."""
+        super().bind(sim)
+        cfg = self._scratch.cfg
         # Without uncertainties every rollout of an action is the same: one is enough.
         self._runs = 1 if cfg == nominal_config(cfg) else self.samples
-        if self._scratch is None or self._scratch.cfg != cfg:
-            if self._scratch is not None:
-                self._scratch.close()
-            self._scratch = VertiportSim(cfg)
-            self._builder = ObservationBuilder(self._scratch)
-        if hasattr(self.base, "bind"):  # the base adopts the env's energy model
-            self.base.bind(self._scratch)
-        self.sim = sim
 
     def close(self) -> None:
-        if self._scratch is not None:
-            self._scratch.close()
-            self._scratch = None
+        super().close()
         if hasattr(self.base, "close"):
             self.base.close()
 

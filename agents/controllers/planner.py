@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -78,7 +79,38 @@ def roll_out(scratch: VertiportSim, builder: ObservationBuilder, base: Controlle
     return total
 
 
-class RolloutPlanner(Controller):
+class ScratchRollouts:
+    """What a model-based controller needs to roll its ``base`` controller out: a scratch copy
+    of the bound env's simulator (without the config's uncertainties when ``nominal``) and its
+    observation builder, both built once per config. Subclasses set ``base``, ``nominal``,
+    ``sim = None``, ``_scratch = None`` and ``_builder = None``."""
+
+    base: Any
+    nominal: bool
+    sim: VertiportSim | None
+    _scratch: VertiportSim | None
+    _builder: ObservationBuilder | None
+
+    def bind(self, sim: VertiportSim) -> None:
+        """Act in the env whose simulator is ``sim``; the base adopts the env's energy model,
+        bound to the scratch copy."""
+        cfg = nominal_config(sim.cfg) if self.nominal else sim.cfg
+        if self._scratch is None or self._scratch.cfg != cfg:
+            if self._scratch is not None:
+                self._scratch.close()
+            self._scratch = VertiportSim(cfg)
+            self._builder = ObservationBuilder(self._scratch)
+        if hasattr(self.base, "bind"):
+            self.base.bind(self._scratch)
+        self.sim = sim
+
+    def close(self) -> None:
+        if self._scratch is not None:
+            self._scratch.close()
+            self._scratch = None
+
+
+class RolloutPlanner(ScratchRollouts, Controller):
     """Chooses, among the legal actions of a vehicle on the ground or hovering, the one whose
     dispatcher rollout earns the most reward; in transit it acts as the dispatcher.
 
@@ -133,19 +165,6 @@ class RolloutPlanner(Controller):
         self.last_forced = False
         self._scratch: VertiportSim | None = None
         self._builder: ObservationBuilder | None = None
-
-    def bind(self, sim: VertiportSim) -> None:
-        """Plan for the env whose simulator is ``sim`` (a scratch copy is built once per config,
-        without its uncertainties when ``nominal``)."""
-        cfg = nominal_config(sim.cfg) if self.nominal else sim.cfg
-        if self._scratch is None or self._scratch.cfg != cfg:
-            if self._scratch is not None:
-                self._scratch.close()
-            self._scratch = VertiportSim(cfg)
-            self._builder = ObservationBuilder(self._scratch)
-        if hasattr(self.base, "bind"):  # the base policy adopts the env's energy model
-            self.base.bind(self._scratch)
-        self.sim = sim
 
     def candidates(self, sim: VertiportSim) -> list[int]:
         """Actions worth simulating for the acting vehicle: every legal action on the ground,
@@ -232,8 +251,3 @@ class RolloutPlanner(Controller):
         best = max(q, key=q.get)
         # Keep the dispatcher's choice unless another action is better by more than the margin.
         return fallback if fallback in q and q[fallback] + self.margin >= q[best] else int(best)
-
-    def close(self) -> None:
-        if self._scratch is not None:
-            self._scratch.close()
-            self._scratch = None
