@@ -21,8 +21,8 @@ counted as collisions) a day, base → candidate, and per case the mean differen
 
 *Unforced losses* say which of those losses a controller could have avoided: on each day, the
 vehicles it lost beyond the fewest any agent of a reference set lost on that day
-(``--reference``; by default the dispatcher and the look-ahead planner, those of them the files
-hold), averaged over the days a reference agent played. The table goes to stdout (Markdown);
+(``--reference``; by default the dispatcher, the look-ahead planner and the look-ahead guard,
+those of them the files hold), averaged over the days a reference agent played. The table goes to stdout (Markdown);
 ``--csv`` also writes it. Exit codes: 0 done, 2 bad input (a
 missing or foreign file, an agent not in the files, no day in common).
 """
@@ -44,8 +44,8 @@ from agents.evaluate.stats import bootstrap_ci
 NEEDED = ("agent", "config", "seed", "total_reward", "stranded_air", "stranded_ground", "collisions")
 Day = tuple[str, int]  # (case, seed)
 #: The reference set of unforced losses when ``--reference`` is not given: those of these
-#: agents the files hold (the dispatcher and the look-ahead planner).
-DEFAULT_REFERENCE = ("heuristic", "rollout")
+#: agents the files hold (the dispatcher, the look-ahead planner and the look-ahead guard).
+DEFAULT_REFERENCE = ("heuristic", "rollout", "guard")
 
 
 class PairedInputError(ValueError):

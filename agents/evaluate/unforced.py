@@ -3,8 +3,9 @@
 On each day ``(case, seed)``, an agent's *unforced* losses are the vehicles it lost beyond the
 fewest that any agent of a reference set lost on the same day
 (:func:`agents.evaluate.paired.unforced_losses`); a loss every reference agent also suffers is
-forced by the day. The reference set is the dispatcher and the look-ahead planner
-(:data:`~agents.evaluate.paired.DEFAULT_REFERENCE`), those of them the evaluation plays.
+forced by the day. The reference set is the dispatcher, the look-ahead planner and the
+look-ahead guard (:data:`~agents.evaluate.paired.DEFAULT_REFERENCE`), those of them the
+evaluation plays.
 
 The number needs other agents' days, so it is made once every day is played: a row per agent and
 case in the summary (``summary.csv``, ``results.json``, the console table, the report), right
@@ -24,8 +25,9 @@ from agents.evaluate.stats import describe
 
 
 def reference_agents(settings: EvalSettings) -> list[str]:
-    """The reference set of the unforced losses: those of the dispatcher and the look-ahead
-    planner that ``settings`` plays, in that order (empty: no unforced losses)."""
+    """The reference set of the unforced losses: those of the dispatcher, the look-ahead planner
+    and the look-ahead guard that ``settings`` plays, in that order (empty: no unforced
+    losses)."""
     return [a for a in DEFAULT_REFERENCE if a in settings.agents]
 
 

@@ -28,6 +28,7 @@ LOST = {
     "random": {"paper": [(1, 2), (0, 0), (2, 0)], "twin": [(0, 3), (1, 1), (0, 0)]},
     "heuristic": {"paper": [(0, 1), (0, 0), (1, 0)], "twin": [(0, 1), (0, 2), (0, 0)]},
     "rollout": {"paper": [(0, 0), (0, 1), (0, 1)], "twin": [(0, 2), (0, 1), (1, 0)]},
+    "guard": {"paper": [(0, 0), (0, 0), (0, 0)], "twin": [(0, 1), (0, 0), (0, 0)]},
 }
 
 
@@ -63,6 +64,19 @@ def test_unforced_losses_are_the_losses_beyond_the_best_reference_agent_of_the_d
     assert rows["rollout", "paper"]["mean"] == pytest.approx(1 / 3)
     assert all(r["metric"] == "unforced_losses" for r in rows.values())
     assert len(rows) == 6
+
+
+def test_the_guard_is_a_reference_agent_too():
+    agents = ("random", "heuristic", "rollout", "guard")
+    s = settings(agents=agents)
+    assert reference_agents(s) == ["heuristic", "rollout", "guard"]
+    rows = {(r["agent"], r["config"]): r for r in unforced_rows(records(agents), s)}
+    # the guard loses nothing on paper: every loss of the others there is unforced
+    assert rows["heuristic", "paper"]["mean"] == pytest.approx(2 / 3)
+    assert rows["random", "paper"]["mean"] == pytest.approx(5 / 3)
+    # on twin the fewest are 1, 0, 0: the dispatcher's 1, 2, 0 -> 0, 2, 0
+    assert rows["heuristic", "twin"]["mean"] == pytest.approx(2 / 3)
+    assert rows["guard", "twin"]["mean"] == 0.0
 
 
 def test_without_a_reference_day_there_is_no_row():
