@@ -25,6 +25,12 @@ dispatcher, docs/training.md), the guard changes a decision only to lose fewer v
 keeps the base's margins everywhere else. It is model-based: it reads the simulator's true
 state (bind it with :meth:`GuardedController.bind`, as the episode runners of
 :mod:`agents.controllers.episode` do).
+
+``clairvoyant=True`` makes it an oracle for studies, not a controller one could deploy: its
+rollouts draw from a copy of the env's own generator, so the rollout of the base's choice is the
+day's actual future (the same gusts, failures and flight plans) for as long as the fleet follows
+the base. What it cannot save with one changed decision and two hours of exact foresight bounds
+what any such look-ahead can save (docs/environment.md, section 8.3).
 """
 
 from __future__ import annotations
@@ -58,13 +64,16 @@ class GuardedController(ScratchRollouts, Controller):
             guard to change it (with one rollout per action, any loss).
         seed: seed of the rollouts' generators, combined with the episode's seed, the step and
             the sample.
+        clairvoyant: roll out once per action, from a copy of the env's own generator (the
+            module's docstring: an oracle, it sees the future); not with ``nominal``.
     """
 
     name = "guard"
 
     def __init__(self, base: str | Any = "heuristic", horizon_min: float = 120.0,
                  samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
-                 quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5) -> None:
+                 quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
+                 clairvoyant: bool = False) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -73,6 +82,9 @@ class GuardedController(ScratchRollouts, Controller):
             raise ValueError(f"quiet_min must be >= 0 minutes, got {quiet_min}")
         if min_lost <= 0:
             raise ValueError(f"min_lost must be > 0 vehicles, got {min_lost}")
+        if clairvoyant and nominal:
+            raise ValueError("clairvoyant rollouts draw the env's own future: they cannot also "
+                             "be nominal (without the config's uncertainties)")
         if isinstance(base, str):
             from agents.controllers.registry import make_controller
 
@@ -85,6 +97,7 @@ class GuardedController(ScratchRollouts, Controller):
         self.quiet_min = float(quiet_min)
         self.seed = int(seed)
         self.min_lost = float(min_lost)
+        self.clairvoyant = bool(clairvoyant)
         self.sim: VertiportSim | None = None
         self._scratch: VertiportSim | None = None
         self._builder: ObservationBuilder | None = None
@@ -109,11 +122,11 @@ class GuardedController(ScratchRollouts, Controller):
 
     def bind(self, sim: VertiportSim) -> None:
         """Guard the env whose simulator is ``sim`` (:class:`ScratchRollouts`); a config
-        without uncertainties, or ``nominal``, is rolled out once per action."""
+        without uncertainties, ``nominal`` or ``clairvoyant``, is rolled out once per action."""
         super().bind(sim)
         cfg = self._scratch.cfg
         # Without uncertainties every rollout of an action is the same: one is enough.
-        self._runs = 1 if cfg == nominal_config(cfg) else self.samples
+        self._runs = 1 if self.clairvoyant or cfg == nominal_config(cfg) else self.samples
 
     def close(self) -> None:
         super().close()
@@ -148,7 +161,8 @@ class GuardedController(ScratchRollouts, Controller):
             lost = reward = 0.0
             runs = 0
             for k in range(self._runs):
-                rng = np.random.default_rng((self.seed, self._episode_seed, sim.step_count, k))
+                rng = None if self.clairvoyant else np.random.default_rng(
+                    (self.seed, self._episode_seed, sim.step_count, k))
                 reward += roll_out(scratch, builder, self.base, snap, a, steps, rng, watch)
                 lost += int(np.count_nonzero(scratch.lost)) - lost_before
                 runs += 1

@@ -51,19 +51,21 @@ def nominal_config(cfg: EnvConfig) -> EnvConfig:
 
 
 def roll_out(scratch: VertiportSim, builder: ObservationBuilder, base: Controller,
-             snap: dict, action: int, steps: int, rng: np.random.Generator,
+             snap: dict, action: int, steps: int, rng: np.random.Generator | None,
              watch: Callable[[VertiportSim], None] | None = None) -> float:
     """Simulate ``action`` from the episode state ``snap`` in ``scratch``, then ``base`` for the
     whole fleet for ``steps - 1`` more steps (fewer at the end of the day); return the sum of
     the acting vehicles' rewards. ``scratch`` holds the end state afterwards; the future is
-    drawn from ``rng``; ``watch(scratch)`` runs after every step.
+    drawn from ``rng`` (``None``: from the generator in ``snap``, which draws the env's own
+    future); ``watch(scratch)`` runs after every step.
 
     When ``base.act`` is a pure function of the observation (``pure_act``), a turn with a single
     legal action takes that action without asking it: it could return nothing else, and no state
     or generator of its own is skipped."""
     single = scratch.single_legal_action if getattr(base, "pure_act", False) else _none
     scratch.restore(snap)
-    scratch.rng = rng
+    if rng is not None:
+        scratch.rng = rng
     total, _ = scratch.step(action)
     if watch is not None:
         watch(scratch)

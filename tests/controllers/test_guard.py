@@ -105,6 +105,34 @@ def test_guarded_dispatcher_loses_fewer_vehicles_than_the_dispatcher():
     assert lost["guard"] < lost["heuristic"]
 
 
+def test_clairvoyant_rollouts_are_the_days_actual_future():
+    """With ``clairvoyant`` the rollout of the base's choice draws the env's own future: after
+    the same 60 steps of the base, the scratch simulator and the env are in the same state."""
+    env = vertiport_v1.env(config="paper_uncertain_10")
+    env.reset(seed=800001)
+    sim = env.unwrapped.sim
+    guard = GuardedController(clairvoyant=True, horizon_min=60)
+    guard.reset(seed=800001)
+    guard.bind(sim)
+    assert guard._runs == 1
+    base = DispatcherController()
+    base.bind(sim)
+    for _ in range(100):
+        env.step(base.act(env.observe(env.agent_selection)))
+    action = base.act(env.observe(env.agent_selection))
+    guard.evaluate(sim, [action])
+    for _ in range(60):
+        env.step(action)
+        action = base.act(env.observe(env.agent_selection))
+    scratch = guard._scratch
+    for key in ("pos", "battery", "status"):
+        np.testing.assert_array_equal(getattr(scratch, key), getattr(sim, key))
+    assert scratch.metrics.failed_takeoffs == sim.metrics.failed_takeoffs
+    assert scratch.rng.bit_generator.state == sim.rng.bit_generator.state
+    guard.close()
+    env.close()
+
+
 def test_arguments_and_unbound_use():
     with pytest.raises(RuntimeError, match="bind"):
         GuardedController().act({"action_mask": np.ones(14, np.int8)})
@@ -116,6 +144,8 @@ def test_arguments_and_unbound_use():
         GuardedController(quiet_min=-1)
     with pytest.raises(ValueError, match="min_lost"):
         GuardedController(min_lost=0)
+    with pytest.raises(ValueError, match="clairvoyant"):
+        GuardedController(clairvoyant=True, nominal=True)
     assert make_controller("guard").name == "guard"
     for config, runs in (("paper", 1), ("paper_uncertain", 4)):  # one where all runs are alike
         env = vertiport_v1.env(config=config)
