@@ -133,6 +133,30 @@ def test_clairvoyant_rollouts_are_the_days_actual_future():
     env.close()
 
 
+def test_clairvoyant_guard_changes_only_the_base_days_that_lose_a_vehicle():
+    """Its rollouts of the base's choice are the base's actual day: where that loses no vehicle,
+    it changes nothing, and the day is the base's, metric for metric; where it does, it finds
+    the decision to change."""
+    env = vertiport_v1.env(config="paper_uncertain_10", **{"schedule.episode_steps": 300})
+    base = run_episode(env, make_controller("heuristic"), seed=800001)
+    guard = GuardedController(clairvoyant=True)
+    seen = run_episode(env, guard, seed=800001)
+    env.close()
+    assert base["stranded"] == 0 and base["failed_takeoffs"] > 0  # a day with failures
+    assert guard.checks > 0 and guard.changes == 0
+    assert seen == base
+    guard.close()
+    # Validation day 800029 at 10 %, its first 8 hours: the base loses two vehicles, and one
+    # decision changed with the day's future in view keeps them.
+    env = vertiport_v1.env(config="paper_uncertain_10", **{"schedule.episode_steps": 480})
+    base = run_episode(env, make_controller("heuristic"), seed=800029)
+    guard = GuardedController(clairvoyant=True)
+    seen = run_episode(env, guard, seed=800029)
+    env.close()
+    assert base["stranded"] >= 2 and seen["stranded"] == 0 and guard.changes == 1
+    guard.close()
+
+
 def test_arguments_and_unbound_use():
     with pytest.raises(RuntimeError, match="bind"):
         GuardedController().act({"action_mask": np.ones(14, np.int8)})
