@@ -22,9 +22,9 @@ counted as collisions) a day, base → candidate, and per case the mean differen
 *Unforced losses* say which of those losses a controller could have avoided: on each day, the
 vehicles it lost beyond the fewest any agent of a reference set lost on that day
 (``--reference``; by default the dispatcher, the look-ahead planner and the look-ahead guard,
-those of them the files hold), averaged over the days a reference agent played. The table goes to stdout (Markdown);
-``--csv`` also writes it. Exit codes: 0 done, 2 bad input (a
-missing or foreign file, an agent not in the files, no day in common).
+those of them the files hold), averaged over the days a reference agent played. The table goes
+to stdout (Markdown); ``--csv`` also writes it. Exit codes: 0 done, 2 bad input (a missing or
+foreign file, an agent not in the files, no day in common).
 """
 
 from __future__ import annotations
