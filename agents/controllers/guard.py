@@ -43,7 +43,6 @@ from agents.controllers.base import Controller
 from agents.controllers.planner import ScratchRollouts, nominal_config, roll_out
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
-from marl_vertiport.spaces import ObservationBuilder
 
 
 class GuardedController(ScratchRollouts, Controller):
@@ -98,9 +97,6 @@ class GuardedController(ScratchRollouts, Controller):
         self.seed = int(seed)
         self.min_lost = float(min_lost)
         self.clairvoyant = bool(clairvoyant)
-        self.sim: VertiportSim | None = None
-        self._scratch: VertiportSim | None = None
-        self._builder: ObservationBuilder | None = None
         self._episode_seed = 0
         self._runs = self.samples
         self._quiet_until_step = -1

@@ -84,14 +84,14 @@ def roll_out(scratch: VertiportSim, builder: ObservationBuilder, base: Controlle
 class ScratchRollouts:
     """What a model-based controller needs to roll its ``base`` controller out: a scratch copy
     of the bound env's simulator (without the config's uncertainties when ``nominal``) and its
-    observation builder, both built once per config. Subclasses set ``base``, ``nominal``,
-    ``sim = None``, ``_scratch = None`` and ``_builder = None``."""
+    observation builder, both built once per config. Subclasses set ``base`` and ``nominal``;
+    until :meth:`bind`, ``sim`` and the scratch copy are ``None``."""
 
     base: Any
     nominal: bool
-    sim: VertiportSim | None
-    _scratch: VertiportSim | None
-    _builder: ObservationBuilder | None
+    sim: VertiportSim | None = None
+    _scratch: VertiportSim | None = None
+    _builder: ObservationBuilder | None = None
 
     def bind(self, sim: VertiportSim) -> None:
         """Act in the env whose simulator is ``sim``; the base adopts the env's energy model,
@@ -159,14 +159,11 @@ class RolloutPlanner(ScratchRollouts, Controller):
         self.seed = int(seed)
         self.base = base if base is not None else DispatcherController()
         self.nominal = bool(nominal)
-        self.sim: VertiportSim | None = None
         #: The candidates' values of the last decision (empty where none was simulated).
         self.last_q: dict[int, float] = {}
         #: Whether the last decision had a legal action ruled out as unsafe (staying aloft
         #: with a low battery), so that the choice carried the cost of a stranded vehicle.
         self.last_forced = False
-        self._scratch: VertiportSim | None = None
-        self._builder: ObservationBuilder | None = None
 
     def candidates(self, sim: VertiportSim) -> list[int]:
         """Actions worth simulating for the acting vehicle: every legal action on the ground,
