@@ -13,7 +13,7 @@ uncertainties (wind gusts, charger and take-off failures) from generators of its
   ``min_lost`` vehicles on average over its rollouts (half a vehicle by default: a loss in at
   least half of them), the action with the fewest vehicles lost on average is taken: the
   base's choice where it ties for the fewest, else the one whose rollouts earn the most
-  reward.
+  reward (with ``prefer="margin"``: keep the most charge).
 
 A check that loses no vehicle and in which no live vehicle's charge falls below ``quiet_pct``
 lets the guard skip the checks of the next ``quiet_min`` minutes: most of a day is far from a
@@ -65,6 +65,9 @@ class GuardedController(ScratchRollouts, Controller):
             the sample.
         clairvoyant: roll out once per action, from a copy of the env's own generator (the
             module's docstring: an oracle, it sees the future); not with ``nominal``.
+        prefer: of the actions that lose the fewest vehicles, take the one whose rollouts earn
+            the most reward (``"reward"``) or keep the most charge: the highest mean over its
+            rollouts of the least charge of a live vehicle (``"margin"``).
     """
 
     name = "guard"
@@ -72,7 +75,7 @@ class GuardedController(ScratchRollouts, Controller):
     def __init__(self, base: str | Any = "heuristic", horizon_min: float = 120.0,
                  samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
-                 clairvoyant: bool = False) -> None:
+                 clairvoyant: bool = False, prefer: str = "reward") -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -84,6 +87,8 @@ class GuardedController(ScratchRollouts, Controller):
         if clairvoyant and nominal:
             raise ValueError("clairvoyant rollouts draw the env's own future: they cannot also "
                              "be nominal (without the config's uncertainties)")
+        if prefer not in ("reward", "margin"):
+            raise ValueError(f"prefer must be 'reward' or 'margin', got {prefer!r}")
         if isinstance(base, str):
             from agents.controllers.registry import make_controller
 
@@ -97,12 +102,14 @@ class GuardedController(ScratchRollouts, Controller):
         self.seed = int(seed)
         self.min_lost = float(min_lost)
         self.clairvoyant = bool(clairvoyant)
+        self.prefer = prefer
         self._episode_seed = 0
         self._runs = self.samples
         self._quiet_until_step = -1
         #: Per action of the last decision that ran the full comparison: (mean vehicles lost,
-        #: mean reward) over its rollouts; empty where the base's choice stood unchallenged.
-        self.last_values: dict[int, tuple[float, float]] = {}
+        #: mean reward, mean least charge %) over its rollouts; empty where the base's choice
+        #: stood unchallenged.
+        self.last_values: dict[int, tuple[float, float, float]] = {}
         #: This episode's decisions checked by rollouts, and decisions changed.
         self.checks = 0
         self.changes = 0
@@ -135,37 +142,43 @@ class GuardedController(ScratchRollouts, Controller):
         return max(1, int(round(self.horizon_min / sim.cfg.schedule.minutes_per_step)))
 
     def evaluate(self, sim: VertiportSim, actions: list[int],
-                 stop_at_loss: bool = False) -> tuple[dict[int, tuple[float, float]], float]:
+                 stop_at_loss: bool = False
+                 ) -> tuple[dict[int, tuple[float, float, float]], float]:
         """Per action, the mean over its rollouts of the vehicles lost (beyond those already
-        lost) and of the reward; and the least charge (%) of a live vehicle seen in any rollout
-        step. ``stop_at_loss``: stop an action's rollouts at the first that loses a vehicle
-        (its means are then over the rollouts run)."""
+        lost), of the reward and of the least charge (%) of a live vehicle in the rollout; and
+        the least charge (%) of a live vehicle seen in any rollout step. ``stop_at_loss``: stop
+        an action's rollouts at the first that loses a vehicle (its means are then over the
+        rollouts run)."""
         scratch, builder = self._scratch, self._builder
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
         steps = self.horizon_steps(sim)
         lost_before = int(np.count_nonzero(sim.lost))
-        least = [100.0]
+        run_least = [100.0]
 
         def watch(s: VertiportSim) -> None:
             live = ~s.lost
             if live.any():
-                least[0] = min(least[0], float(s.battery[live].min()))
+                run_least[0] = min(run_least[0], float(s.battery[live].min()))
 
-        values: dict[int, tuple[float, float]] = {}
+        least = 100.0
+        values: dict[int, tuple[float, float, float]] = {}
         for a in actions:
-            lost = reward = 0.0
+            lost = reward = margin = 0.0
             runs = 0
             for k in range(self._runs):
                 rng = None if self.clairvoyant else np.random.default_rng(
                     (self.seed, self._episode_seed, sim.step_count, k))
+                run_least[0] = 100.0
                 reward += roll_out(scratch, builder, self.base, snap, a, steps, rng, watch)
                 lost += int(np.count_nonzero(scratch.lost)) - lost_before
+                margin += run_least[0]
+                least = min(least, run_least[0])
                 runs += 1
                 if stop_at_loss and lost > 0:
                     break
-            values[a] = (lost / runs, reward / runs)
-        return values, least[0]
+            values[a] = (lost / runs, reward / runs, margin / runs)
+        return values, least
 
     # ------------------------------------------------------------------ decisions
     def act(self, observation: dict) -> int:
@@ -193,9 +206,10 @@ class GuardedController(ScratchRollouts, Controller):
             return choice
         values, _ = self.evaluate(sim, legal if choice in legal else [*legal, choice])
         self.last_values = values
-        fewest = min(lost for lost, _ in values.values())
+        fewest = min(v[0] for v in values.values())
         if values[choice][0] <= fewest or values[choice][0] < self.min_lost:
             return choice
-        best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][1])
+        key = 1 if self.prefer == "reward" else 2
+        best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][key])
         self.changes += 1
         return int(best)

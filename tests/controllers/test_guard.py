@@ -11,6 +11,7 @@ from agents.controllers.guard import GuardedController
 from agents.controllers.registry import make_controller
 from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
+from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
 
 
 class _KeepsHolding(DispatcherController):
@@ -42,11 +43,13 @@ def test_guard_keeps_the_vehicles_its_base_loses():
     assert changes > 0
 
 
-def test_guard_compares_every_legal_action_when_the_base_loses_one():
+@pytest.mark.parametrize("prefer", ["reward", "margin"])
+def test_guard_compares_every_legal_action_when_the_base_loses_one(prefer):
     env = vertiport_v1.env(config="paper")
     env.reset(seed=0)
     sim = env.unwrapped.sim
-    guard = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True)
+    guard = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True, prefer=prefer)
+    col = {"reward": 1, "margin": 2}[prefer]  # the column of last_values preferred
     guard.reset(seed=0)
     guard.bind(sim)
     for _ in range(240):
@@ -60,10 +63,14 @@ def test_guard_compares_every_legal_action_when_the_base_loses_one():
             np.testing.assert_array_equal(before[key], after[key])  # the env is untouched
         assert before["rng"].bit_generator.state == after["rng"].bit_generator.state
         if guard.last_values:  # a full comparison: every legal action, the base's losing one
-            assert set(guard.last_values) == set(np.flatnonzero(obs["action_mask"]).tolist())
-            base_lost = guard.last_values[guard.base.act(obs)][0]
-            assert base_lost >= guard.min_lost and guard.last_values[action][0] == min(
-                lost for lost, _ in guard.last_values.values())
+            values = guard.last_values
+            assert set(values) == set(np.flatnonzero(obs["action_mask"]).tolist())
+            choice = guard.base.act(obs)
+            fewest = min(v[0] for v in values.values())
+            assert values[choice][0] >= guard.min_lost and values[action][0] == fewest
+            if action != choice:  # of the actions that lose the fewest, the preferred one
+                assert values[action][col] == max(v[col] for v in values.values()
+                                                  if v[0] == fewest)
         env.step(action)
     assert guard.changes > 0
     guard.close()
@@ -170,6 +177,8 @@ def test_arguments_and_unbound_use():
         GuardedController(min_lost=0)
     with pytest.raises(ValueError, match="clairvoyant"):
         GuardedController(clairvoyant=True, nominal=True)
+    with pytest.raises(ValueError, match="prefer"):
+        GuardedController(prefer="trips")
     assert make_controller("guard").name == "guard"
     for config, runs in (("paper", 1), ("paper_uncertain", 4)):  # one where all runs are alike
         env = vertiport_v1.env(config=config)
@@ -180,3 +189,33 @@ def test_arguments_and_unbound_use():
         env.close()
     assert make_controller("guard[samples=2]").samples == 2
     assert isinstance(make_controller("guard[base=fcfs]").base, make_controller("fcfs").__class__)
+
+
+@pytest.mark.parametrize("prefer, wanted", [("reward", 0), ("margin", 1)])
+def test_of_the_actions_that_lose_fewest_the_guard_takes_the_preferred(prefer, wanted):
+    """Where the base's choice loses a vehicle and two others lose none, ``prefer`` picks the
+    one that earns more reward or the one that keeps more charge."""
+    env = vertiport_v1.env(config="paper")
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    base = DispatcherController()
+    base.bind(sim)
+    while True:  # the dispatcher's day up to a decision with three legal actions or more
+        obs = env.observe(env.agent_selection)
+        legal = np.flatnonzero(obs["action_mask"]).tolist()
+        if len(legal) >= 3 and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING):
+            break
+        env.step(base.act(obs))
+    guard = GuardedController(nominal=True, prefer=prefer)
+    guard.reset(seed=0)
+    guard.bind(env.unwrapped.sim)
+    choice = guard.base.act(obs)
+    others = [a for a in legal if a != choice][:2]
+    assert len(others) == 2
+    crafted = {choice: (1.0, 90.0, 30.0), others[0]: (0.0, 50.0, 10.0),
+               others[1]: (0.0, 20.0, 60.0)}
+    guard.evaluate = lambda sim, actions, stop_at_loss=False: (
+        {a: crafted.get(a, (2.0, 0.0, 0.0)) for a in actions}, 0.0)
+    assert guard.act(obs) == others[wanted] and guard.changes == 1
+    guard.close()
+    env.close()
