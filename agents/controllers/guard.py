@@ -44,6 +44,10 @@ from agents.controllers.planner import ScratchRollouts, nominal_config, roll_out
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
 
+#: What ``prefer`` may name, and the column of :meth:`GuardedController.evaluate`'s values it
+#: maximises among the actions that lose the fewest vehicles.
+PREFERRED_COLUMN = {"reward": 1, "margin": 2}
+
 
 class GuardedController(ScratchRollouts, Controller):
     """The base controller's decisions, changed only where a look-ahead finds that they lose a
@@ -87,8 +91,8 @@ class GuardedController(ScratchRollouts, Controller):
         if clairvoyant and nominal:
             raise ValueError("clairvoyant rollouts draw the env's own future: they cannot also "
                              "be nominal (without the config's uncertainties)")
-        if prefer not in ("reward", "margin"):
-            raise ValueError(f"prefer must be 'reward' or 'margin', got {prefer!r}")
+        if prefer not in PREFERRED_COLUMN:
+            raise ValueError(f"prefer must be one of {sorted(PREFERRED_COLUMN)}, got {prefer!r}")
         if isinstance(base, str):
             from agents.controllers.registry import make_controller
 
@@ -209,7 +213,7 @@ class GuardedController(ScratchRollouts, Controller):
         fewest = min(v[0] for v in values.values())
         if values[choice][0] <= fewest or values[choice][0] < self.min_lost:
             return choice
-        key = 1 if self.prefer == "reward" else 2
-        best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][key])
+        col = PREFERRED_COLUMN[self.prefer]
+        best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][col])
         self.changes += 1
         return int(best)

@@ -208,7 +208,7 @@ def test_of_the_actions_that_lose_fewest_the_guard_takes_the_preferred(prefer, w
         env.step(base.act(obs))
     guard = GuardedController(nominal=True, prefer=prefer)
     guard.reset(seed=0)
-    guard.bind(env.unwrapped.sim)
+    guard.bind(sim)
     choice = guard.base.act(obs)
     others = [a for a in legal if a != choice][:2]
     assert len(others) == 2
