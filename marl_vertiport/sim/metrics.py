@@ -5,7 +5,9 @@ The paper reports total reward, mean battery, good take-offs and landings, delay
 (section IV); the rest are ours (docs/environment.md, section 9). ``min_separation_m`` is the
 smallest centre distance of two vehicles in the airspace over the day (swept over each step; NaN
 for a day with fewer than two), ``separation_loss_min`` the minutes in which some pair was in
-loss of separation; ``reserve_violations`` the completed trips that touched down with a battery
+loss of separation; ``trail_hold_min`` the vehicle-minutes in which a flight cleared behind a
+departure held where it was, waiting for the departure's reservation to clear (rules v1,
+``atc.trail_departures``; such a vehicle drains as it hovers); ``reserve_violations`` the completed trips that touched down with a battery
 below ``battery.landing_reserve_pct`` (docs/energy.md). :class:`EpisodeMetrics` holds
 an episode's running totals; its :meth:`~EpisodeMetrics.summary` has exactly the keys of
 :data:`METRICS`, in that order, plus ``action_counts``.
@@ -51,6 +53,7 @@ METRICS: dict[str, MetricInfo] = {
     "separation_losses": MetricInfo("separation losses", better=-1, logged=True),
     "min_separation_m": MetricInfo("min separation (m)", "metres", +1, True),
     "separation_loss_min": MetricInfo("loss of separation (min)", "minutes per day", -1, True),
+    "trail_hold_min": MetricInfo("held behind departures (min)", "vehicle-minutes per day", -1),
     "contacts": MetricInfo("contacts", better=-1, logged=True),
     "battery_depletions": MetricInfo("depletions", better=-1, logged=True),
     "stranded_air": MetricInfo("lost in the air", better=-1, logged=True),
@@ -83,6 +86,7 @@ class EpisodeMetrics:
     separation_losses: int = 0
     min_separation_m: float = math.inf
     separation_loss_min: float = 0.0
+    trail_hold_min: float = 0.0
     contacts: int = 0
     battery_depletions: int = 0
     stranded_air: int = 0
@@ -114,6 +118,7 @@ class EpisodeMetrics:
             "min_separation_m": (float(self.min_separation_m) if math.isfinite(self.min_separation_m)
                                  else math.nan),
             "separation_loss_min": float(self.separation_loss_min),
+            "trail_hold_min": float(self.trail_hold_min),
             "contacts": self.contacts,
             "battery_depletions": self.battery_depletions,
             "stranded_air": self.stranded_air,

@@ -65,6 +65,7 @@ class Motion:
             if lead is not None and lead[v] and status[v] != AWAY and self._must_hold(
                     v, (px, py, pz), (px + vel[0] * dt, py + vel[1] * dt, pz + vel[2] * dt)):
                 vel = (0.0, 0.0, 0.0)  # trailing a departure: hold until the way clears
+                self.metrics.trail_hold_min += self.minutes_per_step
             cmd_vel[v] = vel
             f = 1.0 if keep is None else keep[k]
             if f < 0.0 and vel[2] > 0.0 and pz + vel[2] * dt * f < park_z:

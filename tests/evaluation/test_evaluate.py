@@ -34,7 +34,7 @@ AGENTS = ["random", "tests.evaluation.test_evaluate:FirstLegal"]
 METRICS = ["steps", "total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
            "takeoffs", "failed_takeoffs", "landings", "mean_delay_min", "collisions",
            "avoided_conflicts", "separation_losses", "min_separation_m",
-           "separation_loss_min", "contacts", "battery_depletions",
+           "separation_loss_min", "trail_hold_min", "contacts", "battery_depletions",
            "stranded_air", "stranded_ground", "stranded", "reserve_violations", "service_min_lost",
            "completed_trips"]
 

@@ -160,6 +160,9 @@ def test_a_move_across_a_pad_in_use_follows_the_departure_and_holds_until_its_wa
             flown += moved
     assert held >= 1 and flown >= 5  # it held while the climb was in its way, then went on
     assert sim.status[1] == ON_PORT and sim.node[1] == 1 and sim.leaders[1] == ()
+    # The metric counts exactly those steps (the departure ahead never held).
+    assert sim.metrics.trail_hold_min == held * sim.minutes_per_step
+    assert sim.episode_metrics()["trail_hold_min"] == held * sim.minutes_per_step
     # Without trailing, the move stays masked while the departure climbs.
     sim = make(**{"atc.trail_departures": False})
     park(sim, 0, 0)
