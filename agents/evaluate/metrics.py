@@ -18,8 +18,8 @@ METRIC_LABELS = {name: info.label for name, info in {**METRICS, **DERIVED_METRIC
 #: Columns of the printed table (agents as rows).
 TABLE_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
                  "mean_delay_min", "collisions", "separation_losses", "min_separation_m",
-                 "separation_loss_min", "trail_hold_min", "contacts", "stranded_air", "stranded_ground",
-                 UNFORCED, "reserve_violations", "service_min_lost")
+                 "separation_loss_min", "trail_hold_min", "contacts", "stranded_air",
+                 "stranded_ground", UNFORCED, "reserve_violations", "service_min_lost")
 #: Panels of the case-study chart.
 FIGURE_METRICS = ("total_reward", "mean_battery_pct", "good_takeoffs", "good_landings",
                   "mean_delay_min", "collisions", "separation_losses", "min_separation_m",

@@ -7,8 +7,9 @@ smallest centre distance of two vehicles in the airspace over the day (swept ove
 for a day with fewer than two), ``separation_loss_min`` the minutes in which some pair was in
 loss of separation; ``trail_hold_min`` the vehicle-minutes in which a flight cleared behind a
 departure held where it was, waiting for the departure's reservation to clear (rules v1,
-``atc.trail_departures``; such a vehicle drains as it hovers); ``reserve_violations`` the completed trips that touched down with a battery
-below ``battery.landing_reserve_pct`` (docs/energy.md). :class:`EpisodeMetrics` holds
+``atc.trail_departures``; such a vehicle drains as it hovers); ``reserve_violations`` the
+completed trips that touched down with a battery below ``battery.landing_reserve_pct``
+(docs/energy.md). :class:`EpisodeMetrics` holds
 an episode's running totals; its :meth:`~EpisodeMetrics.summary` has exactly the keys of
 :data:`METRICS`, in that order, plus ``action_counts``.
 """
