@@ -310,45 +310,65 @@ class Clearance:
             return [spot]
         return [np.array([nx, ny, self.arrival_alt_m]), spot]
 
-    def _node_clearances(self, node: int, rid: int) -> np.ndarray:
-        """int8 ``(P,)``: 1 where the move from ``node`` to that node clears reservation ``rid``."""
+    def _node_clearances(self, node: int, rid: int, targets: list[int]) -> np.ndarray:
+        """int8 ``(P,)``: at each node of ``targets``, 1 where the move from ``node`` to it clears
+        reservation ``rid``, else 0; other entries are those tested before (-1: never)."""
         key = (node, rid)
         ok = self._node_ok.get(key)
         if ok is None:
-            ok = self._taxi_moves(node).clear_of(self._volumes[rid], self._boxes[rid],
-                                                 self.clear_h_m, self.clear_v_m)
-            self._node_ok[key] = ok
+            ok = self._node_ok[key] = np.full(self.layout.n_nodes, -1, dtype=np.int8)
+            need = targets
+        else:
+            need = [k for k in targets if ok[k] < 0]
+        if need:
+            self._taxi_moves(node).fill(ok, need, self._volumes[rid], self._boxes[rid],
+                                        self.clear_h_m, self.clear_v_m)
         return ok
 
     def _trip_clearance(self, node: int, dest: int, rid: int) -> bool:
         key = (node, dest, rid)
         ok = self._trip_ok.get(key)
         if ok is None:
-            ok = volumes_clear(self._trip_volume(node, dest), self._volumes[rid],
-                               self.clear_h_m, self.clear_v_m)
+            vol, h, vv = self._trip_volume(node, dest), self.clear_h_m, self.clear_v_m
+            ok = boxes_apart(box(vol), self._boxes[rid], h, vv) or volumes_clear(
+                vol, self._volumes[rid], h, vv)
             self._trip_ok[key] = ok
         return ok
 
     # ---------------------------------------------------------------- the check
     def _apply_separation_check(self, v: int, mask: np.ndarray, on_ground: bool) -> None:
         """Clear, in ``mask`` (of vehicle ``v`` at rest on a node), the take-off and the node
-        moves whose volume does not clear another vehicle's reservation."""
+        moves whose volume does not clear another vehicle's reservation. Only the moves the
+        mask still allows are tested (the free nodes the energy check clears); the memo of a
+        situation keeps what has been tested of it: ``[keep, tested nodes]``, ``keep`` 1 where
+        the check keeps the action as it is."""
         node = self.node.item(v)
         dest = self.dest.item(v) if on_ground else -1
         key = (node, dest, self._other_rids(v, trail=True))
-        keep = self._memo.masks.get(key)
-        if keep is None:
-            # A whole mask: 1 where the separation check keeps the action as it is.
+        entry = self._memo.masks.get(key)
+        if entry is None:
             keep = np.ones(self.actions.n, dtype=np.int8)
-            nodes = keep[_NODES:_NODES + self.layout.n_nodes]
             trip = on_ground
             for rid in key[2]:
-                nodes &= self._node_clearances(node, rid)
                 trip = trip and self._trip_clearance(node, dest, rid)
             if not trip:  # a hovering vehicle has no take-off to keep
                 keep[self.actions.takeoff] = 0
-            keep.setflags(write=False)
-            self._memo.masks[key] = keep
+            entry = self._memo.masks[key] = [keep, set()]
+        keep, tested = entry
+        n = self.layout.n_nodes
+        need = [k for k in np.flatnonzero(mask[_NODES:_NODES + n]).tolist() if k not in tested]
+        if need:
+            tested.update(need)
+            nodes = keep[_NODES:_NODES + n]
+            for rid in key[2]:
+                ok = self._node_clearances(node, rid, need)
+                if not all(ok[k] for k in need):
+                    for k in need:
+                        if not ok[k]:
+                            nodes[k] = 0
+                    need = [k for k in need if ok[k]]
+                    if not need:
+                        break
         mask &= keep
 
     def _ids_clear(self, a: int, b: int) -> bool:

@@ -124,6 +124,9 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         # Within this distance two bodies may be a pair the engine checks for contact (their
         # boxes plus its margins overlap): a metre of slack over touching.
         self._near_m = self._touch_m + 1.0
+        # Every pair of vehicles (i < j), in sorted order: the candidates of the separation
+        # measured with arrays (sim/separation.py).
+        self._pair_i, self._pair_j = np.triu_indices(self.n, 1)
         self.battery_model = BatteryModel(config.battery, AIRBORNE, ON_PORT, ON_CHARGER)
         self.reward_model = RewardModel(config.reward, config.schedule)
         self.schedule = FlightSchedule(config.schedule)

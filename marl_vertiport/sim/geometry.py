@@ -78,6 +78,24 @@ def segment_distance(a0: tuple, a1: tuple, b0: tuple, b1: tuple) -> float:
                _point_segment(b0, a0, dax, day), _point_segment(b1, a0, dax, day))
 
 
+def segments_within(a0: tuple, a1: tuple, b0: tuple, b1: tuple, limit: float) -> bool:
+    """``segment_distance(a0, a1, b0, b1) < limit``, with the same float operations: the four
+    end-to-segment distances are compared with ``limit`` as they are computed (their least is
+    below it when one of them is), so a close pair is known at the first that says so."""
+    dax, day = a1[0] - a0[0], a1[1] - a0[1]
+    dbx, dby = b1[0] - b0[0], b1[1] - b0[1]
+    denom = dax * dby - day * dbx
+    if abs(denom) > _EPS:
+        ex, ey = b0[0] - a0[0], b0[1] - a0[1]
+        s = (ex * dby - ey * dbx) / denom
+        t = (ex * day - ey * dax) / denom
+        if 0.0 <= s <= 1.0 and 0.0 <= t <= 1.0:
+            return 0.0 < limit
+    return (_point_segment(a0, b0, dbx, dby) < limit or _point_segment(a1, b0, dbx, dby) < limit
+            or _point_segment(b0, a0, dax, day) < limit
+            or _point_segment(b1, a0, dax, day) < limit)
+
+
 def _point_segment(pt: tuple, s0: tuple, dx: float, dy: float) -> float:
     dd = dx * dx + dy * dy
     u = 0.0
@@ -99,8 +117,9 @@ def swept_min_distance(
     Returns:
         Minimum centre distance of each pair over the interval, shape ``(K,)``.
     """
-    dp = start[pairs_i] - start[pairs_j]
-    dv = (end[pairs_i] - start[pairs_i]) - (end[pairs_j] - start[pairs_j])
+    moved = end - start  # each vehicle's displacement, gathered per pair below
+    dp = start.take(pairs_i, axis=0) - start.take(pairs_j, axis=0)
+    dv = moved.take(pairs_i, axis=0) - moved.take(pairs_j, axis=0)
     dv2 = np.einsum("ij,ij->i", dv, dv)
     t = np.where(dv2 > _EPS, -np.einsum("ij,ij->i", dp, dv) / np.where(dv2 > _EPS, dv2, 1.0), 0.0)
     t = np.clip(t, 0.0, 1.0)

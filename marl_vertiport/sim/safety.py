@@ -26,7 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from marl_vertiport.sim.geometry import (
-    cpa, segment_distance, swept_min_distance, swept_min_distances,
+    _EPS, segments_within, swept_min_distance, swept_min_distances,
 )
 
 #: Above this many vehicle pairs the array version of the swept distance is cheaper.
@@ -55,15 +55,27 @@ def conflicting_pairs(vehicles: Sequence[int], start: dict[int, XY], end: dict[i
         separation_m: the minimum separation.
     """
     pairs = []
+    sqrt = math.sqrt
     for i, a in enumerate(vehicles):
+        sa, ea, va, alt = start[a], end[a], velocity[a], leg_alt_m[a]
         for b in vehicles[i + 1:]:
-            if abs(leg_alt_m[a] - leg_alt_m[b]) >= separation_m:
+            if abs(alt - leg_alt_m[b]) >= separation_m:
                 continue
-            if segment_distance(start[a], end[a], start[b], end[b]) >= separation_m:
-                continue
-            t_min, d_min = cpa([start[a][0] - start[b][0], start[a][1] - start[b][1]],
-                               [velocity[a][0] - velocity[b][0], velocity[a][1] - velocity[b][1]])
-            if t_min >= 0.0 and d_min <= separation_m:
+            # The closest approach (cpa, eqs. 3-4, inline: the same float operations), then the
+            # paths; both must hold, the cheaper is tested first.
+            sb, vb = start[b], velocity[b]
+            dpx, dpy = sa[0] - sb[0], sa[1] - sb[1]
+            dvx, dvy = va[0] - vb[0], va[1] - vb[1]
+            dv2 = dvx * dvx + dvy * dvy
+            if dv2 <= _EPS:
+                if sqrt(dpx * dpx + dpy * dpy) > separation_m:
+                    continue  # t_min = 0
+            else:
+                t_min = -(dpx * dvx + dpy * dvy) / dv2
+                if t_min < 0.0 or sqrt((dpx + t_min * dvx) ** 2
+                                       + (dpy + t_min * dvy) ** 2) > separation_m:
+                    continue
+            if segments_within(sa, ea, sb, end[b], separation_m):
                 pairs.append((a, b))
     return pairs
 

@@ -12,7 +12,12 @@ from __future__ import annotations
 
 import math
 
-from marl_vertiport.sim.safety import conflicting_pairs, planned_velocity, swept_distances_m
+import numpy as np
+
+from marl_vertiport.sim.geometry import swept_min_distance
+from marl_vertiport.sim.safety import (
+    SCALAR_PAIRS_MAX, conflicting_pairs, planned_velocity, swept_distances_m,
+)
 from marl_vertiport.sim.schema import AWAY, IN_TRANSIT_INSIDE
 
 
@@ -86,29 +91,51 @@ class Separation:
         for v in self._gone:  # rules v1: down outside the airspace
             present[v] = False
         mover_set = set(movers)
-        # Every pair of present vehicles with a mover in it, in sorted order.
-        if len(movers) == 1:
-            m = movers[0]
-            pairs = [(o, m) if o < m else (m, o) for o in range(n) if o != m and present[o]]
-        else:
-            pairs = [(a, b) for a in range(n) if present[a]
-                     for b in range(a + 1, n) if present[b] and (a in mover_set or b in mover_set)]
-        if not pairs:
-            return 0, 0
-        dmin = swept_distances_m(self.prev_pos, self.pos, pairs, start, end)
         sep = self.cfg.safety.min_separation_m
+        # Every pair of present vehicles with a mover in it, in sorted order: as lists for a
+        # few, as index arrays for many (then only the pairs closer than the separation or
+        # touching distance are kept as lists, with the least distance of all).
+        if len(movers) == 1 or n * (n - 1) // 2 <= SCALAR_PAIRS_MAX:
+            if len(movers) == 1:
+                m = movers[0]
+                pairs = [(o, m) if o < m else (m, o) for o in range(n) if o != m and present[o]]
+            else:
+                pairs = [(a, b) for a in range(n) if present[a] for b in range(a + 1, n)
+                         if present[b] and (a in mover_set or b in mover_set)]
+            if not pairs:
+                return 0, 0
+            dmin = swept_distances_m(self.prev_pos, self.pos, pairs, start, end)
+            closest = min(dmin)
+        else:
+            live = np.array(present)
+            moving = np.zeros(n, dtype=bool)
+            moving[movers] = True
+            pi, pj = self._pair_i, self._pair_j
+            keep = live[pi] & live[pj] & (moving[pi] | moving[pj])
+            pi, pj = pi[keep], pj[keep]
+            if not len(pi):
+                return 0, 0
+            if len(pi) <= SCALAR_PAIRS_MAX:
+                pairs = list(zip(pi.tolist(), pj.tolist()))
+                dmin = swept_distances_m(self.prev_pos, self.pos, pairs, start, end)
+                closest = min(dmin)
+            else:
+                d = swept_min_distance(self.prev_pos, self.pos, pi, pj)
+                closest = float(d.min())
+                near = np.flatnonzero((d < sep) | (d <= self._touch_m))
+                pairs = list(zip(pi[near].tolist(), pj[near].tolist()))
+                dmin = d[near].tolist()
         losses = {pair for pair, d in zip(pairs, dmin) if d < sep}
         kept = {pair for pair in self.sep_state if pair[0] not in mover_set and pair[1] not in mover_set}
         new_losses = len(losses - self.sep_state)
         self.sep_state = kept | losses
         self.metrics.separation_losses += new_losses
-        closest = min(dmin)
         if closest < self.metrics.min_separation_m:
             self.metrics.min_separation_m = closest
         # Engine contacts: those left at the end of the step, and those resolved within its
         # substeps (a deflected body and a vehicle that came within touching distance of it).
         contacts = set(self.physics.contact_pairs())
-        if contacts or min(dmin) < self._near_m:
+        if contacts or closest < self._near_m:
             # Each step's near passes and contacts are resolved afresh: the engine caches, for a
             # pair of bodies close enough to be checked, its contact points and the last
             # separating axis, and would warm-start the next step from them, a state no snapshot

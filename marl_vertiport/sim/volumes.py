@@ -76,30 +76,60 @@ def plan_distance(s: Segment, t: Segment) -> float:
 
 
 def segments_clear(s: Segment, t: Segment, h_m: float, v_m: float) -> bool:
-    """Whether two segments keep ``v_m`` apart in altitude or ``h_m`` apart in plan view."""
+    """Whether two segments keep ``v_m`` apart in altitude or ``h_m`` apart in plan view:
+    ``plan_distance(s, t) >= h_m`` where the altitude ranges are closer, with the same float
+    operations and answer. Each of the four point-to-segment distances is compared with ``h_m``
+    as it is computed (``sqrt`` of their least is the least of their ``sqrt``), so a pair that
+    is too close is known at the first distance that says so."""
     if s[4] - t[5] >= v_m or t[4] - s[5] >= v_m:
         return True
+    ax, ay, bx, by = s[0], s[1], s[2], s[3]
+    cx, cy, dx, dy = t[0], t[1], t[2], t[3]
     # Plan-view boxes h_m apart along x or y: the segments are at least that far apart.
-    sx0, sx1 = (s[0], s[2]) if s[0] <= s[2] else (s[2], s[0])
-    tx0, tx1 = (t[0], t[2]) if t[0] <= t[2] else (t[2], t[0])
+    sx0, sx1 = (ax, bx) if ax <= bx else (bx, ax)
+    tx0, tx1 = (cx, dx) if cx <= dx else (dx, cx)
     if sx0 - tx1 >= h_m or tx0 - sx1 >= h_m:
         return True
-    sy0, sy1 = (s[1], s[3]) if s[1] <= s[3] else (s[3], s[1])
-    ty0, ty1 = (t[1], t[3]) if t[1] <= t[3] else (t[3], t[1])
+    sy0, sy1 = (ay, by) if ay <= by else (by, ay)
+    ty0, ty1 = (cy, dy) if cy <= dy else (dy, cy)
     if sy0 - ty1 >= h_m or ty0 - sy1 >= h_m:
         return True
-    return plan_distance(s, t) >= h_m
+    # plan_distance, inlined: a crossing, then the ends of each against the other.
+    ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
+    den = ux * vy - uy * vx
+    if abs(den) > _EPS:
+        ex, ey = cx - ax, cy - ay
+        p = (ex * vy - ey * vx) / den
+        q = (ex * uy - ey * ux) / den
+        if 0.0 <= p <= 1.0 and 0.0 <= q <= 1.0:
+            return 0.0 >= h_m
+    sqrt = math.sqrt
+    for px, py, qx, qy, wx, wy in ((ax, ay, cx, cy, vx, vy), (bx, by, cx, cy, vx, vy),
+                                   (cx, cy, ax, ay, ux, uy), (dx, dy, ax, ay, ux, uy)):
+        dd = wx * wx + wy * wy
+        u = 0.0
+        if dd > _EPS:
+            u = ((px - qx) * wx + (py - qy) * wy) / dd
+            u = 0.0 if not u > 0.0 else (u if u < 1.0 else 1.0)  # min(1, max(0, u))
+        ex, ey = px - qx - u * wx, py - qy - u * wy
+        if not sqrt(ex * ex + ey * ey) >= h_m:
+            return False
+    return True
 
 
 def volumes_clear(a: Volume, b: Volume, h_m: float, v_m: float) -> bool:
     """Whether every segment of ``a`` is clear of every segment of ``b``."""
-    return all(segments_clear(s, t, h_m, v_m) for s in a for t in b)
+    for s in a:
+        for t in b:
+            if not segments_clear(s, t, h_m, v_m):
+                return False
+    return True
 
 
 class TaxiMoves:
-    """The moves from one node to every other node, for testing them all against one
-    reservation at once (:meth:`clear_of`): their distinct segments (the climb from the node
-    begins every move, so it is tested once), each move's segments and box, and the box around
+    """The moves from one node to every other node, for testing them against one reservation
+    (:meth:`fill`, :meth:`clear_of`): their distinct segments (the climb from the node begins
+    every move, so it is tested once a call), each move's segments and box, and the box around
     all of them.
 
     Args:
@@ -108,39 +138,60 @@ class TaxiMoves:
 
     def __init__(self, volumes: list[Volume]) -> None:
         index: dict[Segment, int] = {}
-        #: ``(target, segment indices, box)`` of each move.
-        self.moves = [(k, tuple([index.setdefault(seg, len(index)) for seg in vol]), box(vol))
-                      for k, vol in enumerate(volumes) if vol]
+        #: By target node, ``(segment indices, box)`` of the move there, or ``None`` (the node
+        #: itself).
+        self.moves: list[tuple[tuple[int, ...], tuple] | None] = [
+            (tuple([index.setdefault(seg, len(index)) for seg in vol]), box(vol)) if vol else None
+            for vol in volumes]
         self.segments = list(index)
         #: The box around every move: that of all their segments (``None`` where there is no
         #: move).
         self.around = box(tuple(self.segments)) if self.segments else None
         #: int8 ``(P,)``: 1 at every target (the clearances where nothing is in the way).
-        self.free = np.zeros(len(volumes), dtype=np.int8)
-        self.free[[k for k, _, _ in self.moves]] = 1
+        self.free = np.asarray([m is not None for m in self.moves], dtype=np.int8)
         self.free.setflags(write=False)
 
-    def clear_of(self, other: Volume, other_box: tuple, h_m: float, v_m: float) -> np.ndarray:
-        """Read-only int8 ``(P,)``: 1 where the move to that node clears ``other`` (whose
-        :func:`box` is ``other_box``), as :func:`volumes_clear` with the quick box test."""
+    def fill(self, ok: np.ndarray, targets: list[int], other: Volume, other_box: tuple,
+             h_m: float, v_m: float) -> None:
+        """Set ``ok[k]`` (int8 ``(P,)``, writable) for each node ``k`` of ``targets``: 1 where
+        the move to ``k`` clears ``other`` (whose :func:`box` is ``other_box``), as the box test
+        and :func:`volumes_clear` say, else 0 (and 0 at the node itself)."""
         if self.around is None or boxes_apart(self.around, other_box, h_m, v_m):
             # No move, or every move's box is as far apart as the box around them.
-            return self.free
+            free = self.free
+            for k in targets:
+                ok[k] = free[k]
+            return
         seg_ok: list[bool | None] = [None] * len(self.segments)
-        ok = np.zeros(len(self.free), dtype=np.int8)
-        for k, idx, bx in self.moves:
+        segments, moves = self.segments, self.moves
+        for k in targets:
+            move = moves[k]
+            if move is None:
+                ok[k] = 0
+                continue
+            idx, bx = move
             if boxes_apart(bx, other_box, h_m, v_m):
                 ok[k] = 1
                 continue
+            ok[k] = 1
             for i in idx:
                 clear = seg_ok[i]
                 if clear is None:
-                    seg = self.segments[i]
-                    clear = seg_ok[i] = all(segments_clear(seg, t, h_m, v_m) for t in other)
+                    seg = segments[i]
+                    clear = True
+                    for t in other:
+                        if not segments_clear(seg, t, h_m, v_m):
+                            clear = False
+                            break
+                    seg_ok[i] = clear
                 if not clear:
+                    ok[k] = 0
                     break
-            else:
-                ok[k] = 1
+
+    def clear_of(self, other: Volume, other_box: tuple, h_m: float, v_m: float) -> np.ndarray:
+        """Read-only int8 ``(P,)``: :meth:`fill` at every node."""
+        ok = np.zeros(len(self.moves), dtype=np.int8)
+        self.fill(ok, list(range(len(self.moves))), other, other_box, h_m, v_m)
         ok.setflags(write=False)
         return ok
 

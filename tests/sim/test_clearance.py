@@ -109,6 +109,13 @@ def test_moves_tested_at_once_clear_a_reservation_exactly_where_each_does(start,
         expect = bool(vol) and (boxes_apart(box(vol), box(other), h, v)
                                 or volumes_clear(vol, other, h, v))
         assert ok[k] == expect
+    # Filling some nodes alone (the masks test only the moves they still allow) gives the same
+    # answers there and leaves every other entry as it was.
+    some = list(range(0, len(vols), 2))
+    part = np.full(len(vols), -1, dtype=np.int8)
+    TaxiMoves(vols).fill(part, some, other, box(other), h, v)
+    assert [int(part[k]) for k in some] == [int(ok[k]) for k in some]
+    assert all(part[k] == -1 for k in range(len(vols)) if k not in some)
 
 
 # ------------------------------------------------------------------ hand-built situations

@@ -2,10 +2,12 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from marl_vertiport import closest_approach
 from marl_vertiport.sim.geometry import (
-    cpa, segment_distance, swept_min_distance, swept_min_distance_pair,
+    cpa, segment_distance, segments_within, swept_min_distance, swept_min_distance_pair,
 )
 
 
@@ -174,3 +176,15 @@ def test_a_day_is_the_same_on_the_avx2_and_the_avx512_blas_kernels():
         assert run.returncode == 0, run.stderr[-2000:]
         out[kernel] = run.stdout.strip()
     assert out["Haswell"] == out["SkylakeX"] and out["Haswell"].endswith(" 1440")
+
+
+_grid = st.integers(-40, 40).map(lambda k: k / 4.0)  # metres, on a quarter-metre grid
+_xy = st.tuples(_grid, _grid)
+
+
+@settings(max_examples=400, deadline=None)
+@given(a0=_xy, a1=_xy, b0=_xy, b1=_xy, limit=st.integers(0, 40).map(lambda k: k / 4.0))
+def test_segments_within_says_what_segment_distance_says(a0, a1, b0, b1, limit):
+    """The early-exit test of the conflict probe answers ``segment_distance < limit`` exactly,
+    on a grid where distances often equal the limit."""
+    assert segments_within(a0, a1, b0, b1, limit) == (segment_distance(a0, a1, b0, b1) < limit)

@@ -215,3 +215,43 @@ def test_an_emergency_landing_comes_down_beside_a_vehicle_on_the_ground_not_on_i
     assert sim.status[v] == OUT_OF_SERVICE and sim.pos[v, 2] == sim.park_z_m
     assert np.linalg.norm(sim.pos[v, :2] - sim.pos[u, :2]) >= sim._touch_m  # beside, not inside
     assert np.hypot(*sim.pos[v, :2]) < cfg.layout.airspace_radius_m
+
+
+@pytest.mark.parametrize("movers,n_away", [(1, 1), (2, 10), (2, 1), (9, 3)])
+def test_separation_of_a_fleet_is_measured_over_every_pair_with_a_mover(movers, n_away):
+    """Sixteen vehicles (the pairs are measured on lists for a few, on arrays for many): the new
+    losses of separation and the least distance are those of every present pair with a mover,
+    each measured on its own over the step."""
+    from marl_vertiport.sim.geometry import swept_min_distance_pair
+
+    sim = VertiportSim(with_rules(load_config("large_overloaded"), 0))
+    sim.reset(np.random.default_rng(0))
+    sep = sim.cfg.safety.min_separation_m
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        n = sim.n
+        start = rng.uniform(-12.0, 12.0, (n, 3))
+        moving = sorted(rng.choice(n, movers, replace=False).tolist())
+        end = start.copy()
+        end[moving] += rng.uniform(-3.0, 3.0, (movers, 3))
+        status = [HOVERING] * n
+        away = set(rng.choice(n, n_away, replace=False).tolist())
+        for v in away:
+            status[v] = AWAY
+        sim.prev_pos[:] = start
+        sim.pos[:] = end
+        sim._moved, sim._deflected, sim._gone = moving, [], set()
+        sim.sep_state, sim.contact_state = set(), set()
+        sim.metrics.separation_losses, sim.metrics.min_separation_m = 0, float("inf")
+        lost, _ = sim._measure_separation(status, start.tolist(), end.tolist())
+        live = [v for v in moving if v not in away]
+        dist = {(a, b): swept_min_distance_pair(tuple(start[a]), tuple(end[a]),
+                                                tuple(start[b]), tuple(end[b]))
+                for a in range(n) for b in range(a + 1, n)
+                if a not in away and b not in away and (a in live or b in live)}
+        if not dist:
+            assert lost == 0
+            continue
+        assert lost == sum(d < sep for d in dist.values())
+        assert sim.sep_state == {pair for pair, d in dist.items() if d < sep}
+        assert sim.metrics.min_separation_m == pytest.approx(min(dist.values()), rel=1e-12)

@@ -9,9 +9,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from marl_vertiport.config import BatteryConfig, RewardConfig, ScheduleConfig, UncertaintyConfig
 from marl_vertiport.sim.battery import BatteryModel
+from marl_vertiport.sim.geometry import cpa, segment_distance
 from marl_vertiport.sim.reward import RewardModel
 from marl_vertiport.sim.safety import conflicting_pairs, planned_velocity, swept_distances_m
 from marl_vertiport.sim.schedule import FlightSchedule
@@ -109,6 +112,28 @@ class TestSafety:
         end = {0: (10.0, 0.0), 1: (0.0, 0.0)}
         vel = {v: planned_velocity(start[v], end[v], 8.0) for v in start}
         assert conflicting_pairs([0, 1], start, end, vel, [8.0, 8.0], 3.0) == []
+
+    @settings(max_examples=200, deadline=None)
+    @given(st.lists(st.tuples(st.integers(-20, 20), st.integers(-20, 20), st.integers(-20, 20),
+                              st.integers(-20, 20), st.sampled_from([8.0, 10.0, 12.0])),
+                    min_size=2, max_size=7))
+    def test_the_probe_is_its_definition(self, legs):
+        """conflicting_pairs (its closest approach inline, tested before the paths) gives the
+        pairs that eqs. 3-4 and the path distance give, on a 2 m grid of legs."""
+        start = {v: (2.0 * x0, 2.0 * y0) for v, (x0, y0, _, _, _) in enumerate(legs)}
+        end = {v: (2.0 * x1, 2.0 * y1) for v, (_, _, x1, y1, _) in enumerate(legs)}
+        alt = [z for *_, z in legs]
+        vel = {v: planned_velocity(start[v], end[v], 8.0) for v in start}
+        sep = 4.0
+        expect = []
+        for a in range(len(legs)):
+            for b in range(a + 1, len(legs)):
+                t, d = cpa([start[a][0] - start[b][0], start[a][1] - start[b][1]],
+                           [vel[a][0] - vel[b][0], vel[a][1] - vel[b][1]])
+                if (abs(alt[a] - alt[b]) < sep and t >= 0.0 and d <= sep
+                        and segment_distance(start[a], end[a], start[b], end[b]) < sep):
+                    expect.append((a, b))
+        assert conflicting_pairs(list(range(len(legs))), start, end, vel, alt, sep) == expect
 
     def test_swept_distance_sees_a_crossing_within_the_step(self):
         prev = np.array([[0.0, 0.0, 8.0], [10.0, 0.0, 8.0]])
