@@ -94,6 +94,7 @@ class Clearance:
         self._volume_ids, self._volumes, self._boxes = memo.volume_ids, memo.volumes, memo.boxes
         self._node_ok, self._trip_ok = memo.node_ok, memo.trip_ok
         self._taxi_volumes, self._trip_volumes = memo.taxi_volumes, memo.trip_volumes
+        self._trip_boxes = memo.trip_boxes
         self._taxi_move_sets = memo.taxi_moves
 
     def _check_memo(self) -> None:
@@ -330,7 +331,10 @@ class Clearance:
         ok = self._trip_ok.get(key)
         if ok is None:
             vol, h, vv = self._trip_volume(node, dest), self.clear_h_m, self.clear_v_m
-            ok = boxes_apart(box(vol), self._boxes[rid], h, vv) or volumes_clear(
+            bx = self._trip_boxes.get((node, dest))
+            if bx is None:
+                bx = self._trip_boxes[(node, dest)] = box(vol)
+            ok = boxes_apart(bx, self._boxes[rid], h, vv) or volumes_clear(
                 vol, self._volumes[rid], h, vv)
             self._trip_ok[key] = ok
         return ok
@@ -408,22 +412,23 @@ class Clearance:
                 return k
         return -1
 
-    def _clear_hover_spots(self, v: int, free: np.ndarray) -> np.ndarray:
-        """Of the free hover spots ``free``, those whose arrival route from vehicle ``v``'s
-        position clears every other reservation."""
+    def _nearest_clear_hover_spot(self, v: int, spots: list[int]) -> int:
+        """The first of the free hover spots ``spots`` (nearest first) whose arrival route from
+        vehicle ``v``'s position clears every other reservation, or -1 (memoised)."""
         pos = self.pos[v]
         rids = self._other_rids(v, trail=True)
-        spots = free.tolist()
         key = (*pos.tolist(), rids, *spots)
-        kept = self._memo.spots.get(key)
-        if kept is None:
-            kept = np.asarray(
-                [k for k in spots if self._id_clear_of_others(
-                    self._route_id(pos, ("arrival", k), lambda k=k: self._arrival_route(pos, k)),
-                    v, trail=True)], dtype=np.int64)
-            kept.setflags(write=False)
-            self._memo.spots[key] = kept
-        return kept
+        node = self._memo.spots.get(key)
+        if node is None:
+            node = -1
+            pair_clear = self._pair_clear
+            for k in spots:
+                rid = self._route_id(pos, ("arrival", k), lambda k=k: self._arrival_route(pos, k))
+                if all(pair_clear(rid, r) for r in rids):
+                    node = k
+                    break
+            self._memo.spots[key] = node
+        return node
 
     def _landing_point_clear(self, v: int, xy: np.ndarray) -> bool:
         """Rules v1: whether vehicle ``v`` may come down at ``xy`` in an emergency landing: its

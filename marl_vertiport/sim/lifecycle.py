@@ -202,17 +202,18 @@ class Lifecycle:
         slot)."""
         lay = self.layout
         free = np.flatnonzero((lay.node_type == HOVER_SPOT) & (self.node_occupant == -1))
-        if self.sep_check and free.size:
-            free = self._clear_hover_spots(v, free)
-        if free.size == 0:
+        node = -1
+        if free.size:  # nearest first (ties: in node order)
+            d = np.linalg.norm(lay.node_xy_m[free] - self.pos[v, :2], axis=1)
+            spots = free[np.argsort(d, kind="stable")].tolist()
+            node = self._nearest_clear_hover_spot(v, spots) if self.sep_check else spots[0]
+        if node < 0:
             if v not in self._holding:  # holds at the boundary until a spot frees up
                 self._holding.add(v)
                 self._reserve(v)  # where it holds (a holding vehicle does not move)
             return
         self._holding.discard(v)
         self.slot_of[v] = -1
-        d = np.linalg.norm(lay.node_xy_m[free] - self.pos[v, :2], axis=1)
-        node = int(free[np.argmin(d)])
         self._occupy(v, node)
         self._set_route(v, self._arrival_route(self.pos[v], node),
                         self.cfg.flight.arrival_altitude_m)

@@ -207,19 +207,20 @@ class VolumeMemo:
         self.volume_ids: dict[Volume, int] = {}
         self.volumes: list[Volume] = []
         self.boxes: list[tuple] = []
-        self.node_ok: dict[tuple[int, int], np.ndarray] = {}
+        self.node_ok: dict[tuple[int, int], np.ndarray] = {}  # -1: not tested yet
         self.trip_ok: dict[tuple[int, int, int], bool] = {}
         self.taxi_volumes: dict[int, list[Volume]] = {}
         self.taxi_moves: dict[int, TaxiMoves] = {}
         self.trip_volumes: dict[tuple[int, int], Volume] = {}
+        self.trip_boxes: dict[tuple[int, int], tuple] = {}
         self.lifted: dict[tuple[int, int, bool], int] = {}
         self.pair_ok: dict[tuple[int, int], bool] = {}
         self.avoid: dict[tuple, int | None] = {}
         self.hold: dict[tuple, bool] = {}
         self.route_ids: dict[tuple, int] = {}
         self.flights: dict[tuple, tuple] = {}
-        self.masks: dict[tuple, np.ndarray] = {}
-        self.spots: dict[tuple, np.ndarray] = {}
+        self.masks: dict[tuple, list] = {}  # [keep mask, the nodes tested]
+        self.spots: dict[tuple, int] = {}
         self.slot_order: dict[tuple, list[int]] = {}
         self.slot_ids: dict[int, list[int]] = {}
         self.slot_routes: dict[tuple, tuple] = {}
@@ -255,6 +256,9 @@ def shared_memo(key: tuple) -> VolumeMemo:
 
 def box(vol: Volume) -> tuple[float, float, float, float, float, float]:
     """Bounding box ``(x_lo, x_hi, y_lo, y_hi, z_lo, z_hi)`` of a volume."""
+    if len(vol) == 1:  # the most common: a point or one leg
+        s = vol[0]
+        return (min(s[0], s[2]), max(s[0], s[2]), min(s[1], s[3]), max(s[1], s[3]), s[4], s[5])
     xs = [c for s in vol for c in (s[0], s[2])]
     ys = [c for s in vol for c in (s[1], s[3])]
     return (min(xs), max(xs), min(ys), max(ys), min(s[4] for s in vol), max(s[5] for s in vol))
