@@ -62,18 +62,27 @@ def cpa(dp: list[float], dv: list[float]) -> tuple[float, float]:
     return t_min, math.sqrt(sum((a + t_min * b) ** 2 for a, b in zip(dp, dv)))
 
 
+def plan_crossing(ax: float, ay: float, ux: float, uy: float, cx: float, cy: float,
+                  vx: float, vy: float, eps: float) -> bool:
+    """Whether the 2-D segments from ``(ax, ay)`` along ``(ux, uy)`` and from ``(cx, cy)``
+    along ``(vx, vy)`` cross; segments within ``eps`` of parallel are not counted as crossing
+    (the distances of their ends decide)."""
+    den = ux * vy - uy * vx
+    if abs(den) > eps:
+        ex, ey = cx - ax, cy - ay
+        s = (ex * vy - ey * vx) / den
+        t = (ex * uy - ey * ux) / den
+        return 0.0 <= s <= 1.0 and 0.0 <= t <= 1.0
+    return False
+
+
 def segment_distance(a0: tuple, a1: tuple, b0: tuple, b1: tuple) -> float:
     """Smallest distance between the 2-D segments ``a0-a1`` and ``b0-b1`` (metres); zero when
     they intersect. Degenerate segments (points) are allowed."""
     dax, day = a1[0] - a0[0], a1[1] - a0[1]
     dbx, dby = b1[0] - b0[0], b1[1] - b0[1]
-    denom = dax * dby - day * dbx
-    if abs(denom) > _EPS:
-        ex, ey = b0[0] - a0[0], b0[1] - a0[1]
-        s = (ex * dby - ey * dbx) / denom
-        t = (ex * day - ey * dax) / denom
-        if 0.0 <= s <= 1.0 and 0.0 <= t <= 1.0:
-            return 0.0
+    if plan_crossing(a0[0], a0[1], dax, day, b0[0], b0[1], dbx, dby, _EPS):
+        return 0.0
     return min(_point_segment(a0, b0, dbx, dby), _point_segment(a1, b0, dbx, dby),
                _point_segment(b0, a0, dax, day), _point_segment(b1, a0, dax, day))
 
@@ -84,13 +93,8 @@ def segments_within(a0: tuple, a1: tuple, b0: tuple, b1: tuple, limit: float) ->
     below it when one of them is), so a close pair is known at the first that says so."""
     dax, day = a1[0] - a0[0], a1[1] - a0[1]
     dbx, dby = b1[0] - b0[0], b1[1] - b0[1]
-    denom = dax * dby - day * dbx
-    if abs(denom) > _EPS:
-        ex, ey = b0[0] - a0[0], b0[1] - a0[1]
-        s = (ex * dby - ey * dbx) / denom
-        t = (ex * day - ey * dax) / denom
-        if 0.0 <= s <= 1.0 and 0.0 <= t <= 1.0:
-            return 0.0 < limit
+    if plan_crossing(a0[0], a0[1], dax, day, b0[0], b0[1], dbx, dby, _EPS):
+        return 0.0 < limit
     return (_point_segment(a0, b0, dbx, dby) < limit or _point_segment(a1, b0, dbx, dby) < limit
             or _point_segment(b0, a0, dax, day) < limit
             or _point_segment(b1, a0, dax, day) < limit)

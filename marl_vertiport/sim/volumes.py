@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from marl_vertiport.sim.geometry import plan_crossing
+
 #: A segment of a volume: plan-view start and end, and the altitude range it spans,
 #: ``(ax, ay, bx, by, z_low, z_high)`` in metres (margins applied).
 Segment = tuple[float, float, float, float, float, float]
@@ -62,13 +64,8 @@ def plan_distance(s: Segment, t: Segment) -> float:
     ax, ay, bx, by = s[0], s[1], s[2], s[3]
     cx, cy, dx, dy = t[0], t[1], t[2], t[3]
     ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
-    den = ux * vy - uy * vx
-    if abs(den) > _EPS:
-        ex, ey = cx - ax, cy - ay
-        p = (ex * vy - ey * vx) / den
-        q = (ex * uy - ey * ux) / den
-        if 0.0 <= p <= 1.0 and 0.0 <= q <= 1.0:
-            return 0.0
+    if plan_crossing(ax, ay, ux, uy, cx, cy, vx, vy, _EPS):
+        return 0.0
     return math.sqrt(min(_point_segment_sq(ax, ay, cx, cy, dx, dy),
                          _point_segment_sq(bx, by, cx, cy, dx, dy),
                          _point_segment_sq(cx, cy, ax, ay, bx, by),
@@ -96,13 +93,8 @@ def segments_clear(s: Segment, t: Segment, h_m: float, v_m: float) -> bool:
         return True
     # plan_distance, inlined: a crossing, then the ends of each against the other.
     ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
-    den = ux * vy - uy * vx
-    if abs(den) > _EPS:
-        ex, ey = cx - ax, cy - ay
-        p = (ex * vy - ey * vx) / den
-        q = (ex * uy - ey * ux) / den
-        if 0.0 <= p <= 1.0 and 0.0 <= q <= 1.0:
-            return 0.0 >= h_m
+    if plan_crossing(ax, ay, ux, uy, cx, cy, vx, vy, _EPS):
+        return 0.0 >= h_m
     sqrt = math.sqrt
     for px, py, qx, qy, wx, wy in ((ax, ay, cx, cy, vx, vy), (bx, by, cx, cy, vx, vy),
                                    (cx, cy, ax, ay, ux, uy), (dx, dy, ax, ay, ux, uy)):
