@@ -311,13 +311,13 @@ class Clearance:
             return [spot]
         return [np.array([nx, ny, self.arrival_alt_m]), spot]
 
-    def _node_clearances(self, node: int, rid: int, targets: list[int]) -> np.ndarray:
-        """int8 ``(P,)``: at each node of ``targets``, 1 where the move from ``node`` to it clears
-        reservation ``rid``, else 0; other entries are those tested before (-1: never)."""
+    def _node_clearances(self, node: int, rid: int, targets: list[int]) -> list[int]:
+        """By node (``P`` ints): at each node of ``targets``, 1 where the move from ``node`` to it
+        clears reservation ``rid``, else 0; other entries are those tested before (-1: never)."""
         key = (node, rid)
         ok = self._node_ok.get(key)
         if ok is None:
-            ok = self._node_ok[key] = np.full(self.layout.n_nodes, -1, dtype=np.int8)
+            ok = self._node_ok[key] = [-1] * self.layout.n_nodes
             need = targets
         else:
             need = [k for k in targets if ok[k] < 0]

@@ -142,15 +142,16 @@ class TaxiMoves:
         #: int8 ``(P,)``: 1 at every target (the clearances where nothing is in the way).
         self.free = np.asarray([m is not None for m in self.moves], dtype=np.int8)
         self.free.setflags(write=False)
+        self._free_list = self.free.tolist()
 
-    def fill(self, ok: np.ndarray, targets: list[int], other: Volume, other_box: tuple,
+    def fill(self, ok: list[int] | np.ndarray, targets: list[int], other: Volume, other_box: tuple,
              h_m: float, v_m: float) -> None:
-        """Set ``ok[k]`` (int8 ``(P,)``, writable) for each node ``k`` of ``targets``: 1 where
-        the move to ``k`` clears ``other`` (whose :func:`box` is ``other_box``), as the box test
-        and :func:`volumes_clear` say, else 0 (and 0 at the node itself)."""
+        """Set ``ok[k]`` (``P`` ints, a list or an array) for each node ``k`` of ``targets``: 1
+        where the move to ``k`` clears ``other`` (whose :func:`box` is ``other_box``), as the
+        box test and :func:`volumes_clear` say, else 0 (and 0 at the node itself)."""
         if self.around is None or boxes_apart(self.around, other_box, h_m, v_m):
             # No move, or every move's box is as far apart as the box around them.
-            free = self.free
+            free = self._free_list
             for k in targets:
                 ok[k] = free[k]
             return
@@ -199,7 +200,7 @@ class VolumeMemo:
         self.volume_ids: dict[Volume, int] = {}
         self.volumes: list[Volume] = []
         self.boxes: list[tuple] = []
-        self.node_ok: dict[tuple[int, int], np.ndarray] = {}  # -1: not tested yet
+        self.node_ok: dict[tuple[int, int], list[int]] = {}  # -1: not tested yet
         self.trip_ok: dict[tuple[int, int, int], bool] = {}
         self.taxi_volumes: dict[int, list[Volume]] = {}
         self.taxi_moves: dict[int, TaxiMoves] = {}
