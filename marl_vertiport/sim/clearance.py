@@ -246,10 +246,6 @@ class Clearance:
     def _clear_of_others(self, vol: Volume, v: int, trail: bool = False) -> bool:
         return not self._blockers(vol, v, trail)
 
-    def _id_clear_of_others(self, vid: int, v: int, trail: bool = False) -> bool:
-        """:meth:`_clear_of_others` for the interned volume ``vid`` (memoised per pair)."""
-        return all(self._pair_clear(vid, rid) for rid in self._other_rids(v, trail))
-
     def _point_id(self, xyz: np.ndarray) -> int:
         """The interned volume of the point ``xyz`` (a vehicle at rest, a holding slot)."""
         return self._route_id(xyz, ("at",), tuple)
