@@ -95,17 +95,13 @@ class Separation:
         # Every pair of present vehicles with a mover in it, in sorted order: as lists for a
         # few, as index arrays for many (then only the pairs closer than the separation or
         # touching distance are kept as lists, with the least distance of all).
-        if len(movers) == 1 or n * (n - 1) // 2 <= SCALAR_PAIRS_MAX:
-            if len(movers) == 1:
-                m = movers[0]
-                pairs = [(o, m) if o < m else (m, o) for o in range(n) if o != m and present[o]]
-            else:
-                pairs = [(a, b) for a in range(n) if present[a] for b in range(a + 1, n)
-                         if present[b] and (a in mover_set or b in mover_set)]
-            if not pairs:
-                return 0, 0
-            dmin = swept_distances_m(self.prev_pos, self.pos, pairs, start, end)
-            closest = min(dmin)
+        pairs: list[tuple[int, int]] | None
+        if len(movers) == 1:
+            m = movers[0]
+            pairs = [(o, m) if o < m else (m, o) for o in range(n) if o != m and present[o]]
+        elif n * (n - 1) // 2 <= SCALAR_PAIRS_MAX:
+            pairs = [(a, b) for a in range(n) if present[a] for b in range(a + 1, n)
+                     if present[b] and (a in mover_set or b in mover_set)]
         else:
             live = np.array(present)
             moving = np.zeros(n, dtype=bool)
@@ -113,18 +109,18 @@ class Separation:
             pi, pj = self._pair_i, self._pair_j
             keep = live[pi] & live[pj] & (moving[pi] | moving[pj])
             pi, pj = pi[keep], pj[keep]
-            if not len(pi):
+            pairs = list(zip(pi.tolist(), pj.tolist())) if len(pi) <= SCALAR_PAIRS_MAX else None
+        if pairs is not None:
+            if not pairs:
                 return 0, 0
-            if len(pi) <= SCALAR_PAIRS_MAX:
-                pairs = list(zip(pi.tolist(), pj.tolist()))
-                dmin = swept_distances_m(self.prev_pos, self.pos, pairs, start, end)
-                closest = min(dmin)
-            else:
-                d = swept_min_distance(self.prev_pos, self.pos, pi, pj)
-                closest = float(d.min())
-                near = np.flatnonzero((d < sep) | (d <= self._touch_m))
-                pairs = list(zip(pi[near].tolist(), pj[near].tolist()))
-                dmin = d[near].tolist()
+            dmin = swept_distances_m(self.prev_pos, self.pos, pairs, start, end)
+            closest = min(dmin)
+        else:
+            dist = swept_min_distance(self.prev_pos, self.pos, pi, pj)
+            closest = float(dist.min())
+            near = np.flatnonzero((dist < sep) | (dist <= self._touch_m))
+            pairs = list(zip(pi[near].tolist(), pj[near].tolist()))
+            dmin = dist[near].tolist()
         losses = {pair for pair, d in zip(pairs, dmin) if d < sep}
         kept = {pair for pair in self.sep_state if pair[0] not in mover_set and pair[1] not in mover_set}
         new_losses = len(losses - self.sep_state)

@@ -91,7 +91,8 @@ def segments_clear(s: Segment, t: Segment, h_m: float, v_m: float) -> bool:
     ty0, ty1 = (cy, dy) if cy <= dy else (dy, cy)
     if sy0 - ty1 >= h_m or ty0 - sy1 >= h_m:
         return True
-    # plan_distance, inlined: a crossing, then the ends of each against the other.
+    # plan_distance, inlined: a crossing, then the ends of each against the other (the loop is
+    # _point_segment_sq written out: four calls of it cost about 5 % of a step on `large`).
     ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
     if plan_crossing(ax, ay, ux, uy, cx, cy, vx, vy, _EPS):
         return 0.0 >= h_m
