@@ -2,7 +2,7 @@
 
 The base controller (the dispatcher by default) decides; the guard only vetoes. At a decision
 that matters (the acting vehicle on a port, on a charger or hovering, with more than one legal
-action) it simulates the base's choice, then the base for the whole fleet, over the next
+action) it simulates the base's choice, then the base (or ``fleet``) for the whole fleet, over the next
 ``horizon_min`` minutes, ``samples`` times, in a copy of the simulator
 (:meth:`VertiportSim.snapshot` / :meth:`~VertiportSim.restore`) that draws the config's
 uncertainties (wind gusts, charger and take-off failures) from generators of its own:
@@ -72,6 +72,12 @@ class GuardedController(ScratchRollouts, Controller):
         prefer: of the actions that lose the fewest vehicles, take the one whose rollouts earn
             the most reward (``"reward"``) or keep the most charge: the highest mean over its
             rollouts of the least charge of a live vehicle (``"margin"``).
+        fleet: the controller that flies the whole fleet in the rollouts after the decision's
+            own step: an agent spec or a controller object; default (``None``): ``base``. Set
+            it where the base is too slow to roll out (``guard[base=rollout,fleet=heuristic]``,
+            ``guard[base=gcn,fleet=heuristic]``): the check then asks whether the base's choice,
+            followed by ``fleet``'s decisions, loses a vehicle. A model-based base is bound to
+            the env's own simulator, ``fleet`` to the scratch copy.
     """
 
     name = "guard"
@@ -79,7 +85,8 @@ class GuardedController(ScratchRollouts, Controller):
     def __init__(self, base: str | Any = "heuristic", horizon_min: float = 120.0,
                  samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
-                 clairvoyant: bool = False, prefer: str = "reward") -> None:
+                 clairvoyant: bool = False, prefer: str = "reward",
+                 fleet: str | Any | None = None) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -93,11 +100,15 @@ class GuardedController(ScratchRollouts, Controller):
                              "be nominal (without the config's uncertainties)")
         if prefer not in PREFERRED_COLUMN:
             raise ValueError(f"prefer must be one of {sorted(PREFERRED_COLUMN)}, got {prefer!r}")
-        if isinstance(base, str):
-            from agents.controllers.registry import make_controller
+        from agents.controllers.registry import make_controller
 
+        if isinstance(base, str):
             base = make_controller(base)
+        if isinstance(fleet, str):
+            fleet = make_controller(fleet)
         self.base = base
+        #: The rollouts' controller (``fleet``); ``None``: the base.
+        self.fleet = fleet
         self.horizon_min = float(horizon_min)
         self.samples = int(samples)
         self.nominal = bool(nominal)
@@ -124,21 +135,34 @@ class GuardedController(ScratchRollouts, Controller):
         self._quiet_until_step = -1
         self.last_values = {}
         self.checks = self.changes = 0
-        if hasattr(self.base, "reset"):
-            self.base.reset(seed=seed)
+        for policy in self._policies():
+            if hasattr(policy, "reset"):
+                policy.reset(seed=seed)
+
+    @property
+    def rollout_policy(self) -> Any:
+        """The controller that flies the fleet in the rollouts: ``fleet``, else ``base``."""
+        return self.base if self.fleet is None else self.fleet
+
+    def _policies(self) -> list[Any]:
+        return [self.base] if self.fleet is None else [self.base, self.fleet]
 
     def bind(self, sim: VertiportSim) -> None:
         """Guard the env whose simulator is ``sim`` (:class:`ScratchRollouts`); a config
-        without uncertainties, ``nominal`` or ``clairvoyant``, is rolled out once per action."""
+        without uncertainties, ``nominal`` or ``clairvoyant``, is rolled out once per action.
+        With a ``fleet`` of its own, a model-based base decides on ``sim`` itself."""
         super().bind(sim)
+        if self.fleet is not None and hasattr(self.base, "bind"):
+            self.base.bind(sim)
         cfg = self._scratch.cfg
         # Without uncertainties every rollout of an action is the same: one is enough.
         self._runs = 1 if self.clairvoyant or cfg == nominal_config(cfg) else self.samples
 
     def close(self) -> None:
         super().close()
-        if hasattr(self.base, "close"):
-            self.base.close()
+        for policy in self._policies():
+            if hasattr(policy, "close"):
+                policy.close()
 
     # ------------------------------------------------------------------ rollouts
     def horizon_steps(self, sim: VertiportSim) -> int:
@@ -174,7 +198,8 @@ class GuardedController(ScratchRollouts, Controller):
                 rng = None if self.clairvoyant else np.random.default_rng(
                     (self.seed, self._episode_seed, sim.step_count, k))
                 run_least[0] = 100.0
-                reward += roll_out(scratch, builder, self.base, snap, a, steps, rng, watch)
+                reward += roll_out(scratch, builder, self.rollout_policy, snap, a, steps, rng,
+                                   watch)
                 lost += int(np.count_nonzero(scratch.lost)) - lost_before
                 margin += run_least[0]
                 least = min(least, run_least[0])

@@ -93,17 +93,22 @@ class ScratchRollouts:
     _scratch: VertiportSim | None = None
     _builder: ObservationBuilder | None = None
 
+    @property
+    def rollout_policy(self) -> Any:
+        """The controller that flies the fleet in the rollouts: ``base``."""
+        return self.base
+
     def bind(self, sim: VertiportSim) -> None:
-        """Act in the env whose simulator is ``sim``; the base adopts the env's energy model,
-        bound to the scratch copy."""
+        """Act in the env whose simulator is ``sim``; the controller of the rollouts
+        (:attr:`rollout_policy`) adopts the env's energy model, bound to the scratch copy."""
         cfg = nominal_config(sim.cfg) if self.nominal else sim.cfg
         if self._scratch is None or self._scratch.cfg != cfg:
             if self._scratch is not None:
                 self._scratch.close()
             self._scratch = VertiportSim(cfg)
             self._builder = ObservationBuilder(self._scratch)
-        if hasattr(self.base, "bind"):
-            self.base.bind(self._scratch)
+        if hasattr(self.rollout_policy, "bind"):
+            self.rollout_policy.bind(self._scratch)
         self.sim = sim
 
     def close(self) -> None:

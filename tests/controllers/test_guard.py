@@ -219,3 +219,61 @@ def test_of_the_actions_that_lose_fewest_the_guard_takes_the_preferred(prefer, w
     assert guard.act(obs) == others[wanted] and guard.changes == 1
     guard.close()
     env.close()
+
+
+class _Recorder(DispatcherController):
+    """The dispatcher, recording the simulator it is bound to and how often it acts."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.bound = None
+        self.calls = 0
+
+    def bind(self, sim) -> None:
+        super().bind(sim)
+        self.bound = sim
+
+    def act(self, observation: dict) -> int:
+        self.calls += 1
+        return super().act(observation)
+
+
+def test_a_fleet_of_its_own_flies_the_rollouts_and_the_base_decides_on_the_env():
+    """With ``fleet`` the base is bound to the env's simulator and only decides; the fleet,
+    bound to the scratch copy, flies every rollout; with a fleet that decides as the base
+    does, every decision is the guard's without it."""
+    env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 240})
+    base, fleet = _Recorder(), _Recorder()
+    guard = GuardedController(base=base, fleet=fleet, horizon_min=30, nominal=True)
+    plain = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True)
+    shared = GuardedController(base=_KeepsHolding(), fleet=_KeepsHolding(), horizon_min=30,
+                               nominal=True)
+    env.reset(seed=0)
+    guard.reset(seed=0)
+    guard.bind(env.unwrapped.sim)
+    assert base.bound is env.unwrapped.sim and fleet.bound is guard._scratch
+    assert guard.rollout_policy is fleet and plain.rollout_policy is plain.base
+    for seed in range(2):
+        got = {}
+        for name, g in (("plain", plain), ("shared", shared)):
+            actions = []
+            env.reset(seed=seed)
+            g.reset(seed=seed)
+            g.bind(env.unwrapped.sim)
+            for agent in env.agent_iter():
+                if env.terminations[agent] or env.truncations[agent]:
+                    env.step(None)
+                    continue
+                actions.append(g.act(env.observe(agent)))
+                env.step(actions[-1])
+            got[name] = (actions, g.changes)
+        assert got["plain"] == got["shared"] and got["plain"][1] > 0
+    # The base decides once a turn; the rollouts are the fleet's.
+    env.reset(seed=0)
+    run_episode(env, guard, seed=0)
+    assert guard.checks > 0 and fleet.calls > base.calls > 0
+    assert isinstance(make_controller("guard[base=rollout,fleet=heuristic]").fleet,
+                      DispatcherController)
+    for g in (guard, plain, shared):
+        g.close()
+    env.close()
