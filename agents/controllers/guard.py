@@ -128,6 +128,8 @@ class GuardedController(ScratchRollouts, Controller):
         #: This episode's decisions checked by rollouts, and decisions changed.
         self.checks = 0
         self.changes = 0
+        #: Whether the last decision was changed (the base's choice lost a vehicle).
+        self.last_changed = False
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed: int | None = None) -> None:
@@ -135,6 +137,7 @@ class GuardedController(ScratchRollouts, Controller):
         self._quiet_until_step = -1
         self.last_values = {}
         self.checks = self.changes = 0
+        self.last_changed = False
         for policy in self._policies():
             if hasattr(policy, "reset"):
                 policy.reset(seed=seed)
@@ -210,6 +213,19 @@ class GuardedController(ScratchRollouts, Controller):
         return values, least
 
     # ------------------------------------------------------------------ decisions
+    @property
+    def last_q(self) -> dict[int, float]:
+        """For a teacher (:mod:`agents.training.imitation`): the base's values of the
+        candidates of the last decision, where the base's choice stood (empty otherwise or if
+        the base has none)."""
+        return {} if self.last_changed else dict(getattr(self.base, "last_q", {}) or {})
+
+    @property
+    def last_forced(self) -> bool:
+        """Whether the last decision ruled a legal action out as unsafe: the guard changed the
+        base's choice, which lost a vehicle (or the base itself ruled one out)."""
+        return self.last_changed or bool(getattr(self.base, "last_forced", False))
+
     def act(self, observation: dict) -> int:
         sim = self.sim
         if sim is None:
@@ -217,6 +233,7 @@ class GuardedController(ScratchRollouts, Controller):
                                "first (the episode runners of agents.controllers.episode do)")
         choice = int(self.base.act(observation))
         self.last_values = {}
+        self.last_changed = False
         v = sim.acting
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING) or sim.step_count < self._quiet_until_step:
             return choice
@@ -241,4 +258,5 @@ class GuardedController(ScratchRollouts, Controller):
         col = PREFERRED_COLUMN[self.prefer]
         best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][col])
         self.changes += 1
+        self.last_changed = True
         return int(best)

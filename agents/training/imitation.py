@@ -7,6 +7,10 @@ Teachers (``pretrain.teacher``):
   steps ahead). It plays clearly better than the dispatcher but reads the simulator and spends
   tens of milliseconds a decision; the actor learns to take its decisions from observations
   alone, at a fraction of a millisecond.
+- ``guarded_rollout``: the planner behind the look-ahead guard of :mod:`agents.controllers.guard`
+  (the dispatcher flies the guard's rollouts, with the config's uncertainties): the planner's
+  choice stands unless it loses a vehicle where another action loses fewer. A decision the
+  guard changes is weighted as one whose wrong choice loses a vehicle (``regret_cap``).
 - ``heuristic``: the expert dispatcher itself.
 
 Days of demonstrations run as tasks of the execution layer (:mod:`agents.execution`: local
@@ -44,7 +48,7 @@ from marl_vertiport.sim.metrics import TRAINING_METRICS
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).
 ACTOR_GROUPS = (*POLICY_GROUPS, "action_mask")
-TEACHERS = ("rollout", "heuristic")
+TEACHERS = ("rollout", "guarded_rollout", "heuristic")
 
 
 @dataclass(frozen=True)
@@ -73,6 +77,12 @@ def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: i
 
     if name == "rollout":
         return RolloutPlanner(horizon=rollout_horizon, margin=rollout_margin, seed=seed)
+    if name == "guarded_rollout":
+        from agents.controllers.guard import GuardedController
+
+        return GuardedController(
+            base=RolloutPlanner(horizon=rollout_horizon, margin=rollout_margin, seed=seed),
+            fleet=DispatcherController(), seed=seed)
     if name == "heuristic":
         return DispatcherController()
     raise ValueError(f"teacher {name!r}: use one of {TEACHERS}")

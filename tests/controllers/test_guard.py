@@ -71,6 +71,9 @@ def test_guard_compares_every_legal_action_when_the_base_loses_one(prefer):
             if action != choice:  # of the actions that lose the fewest, the preferred one
                 assert values[action][col] == max(v[col] for v in values.values()
                                                   if v[0] == fewest)
+        # As a teacher: a changed decision ruled the base's choice out as unsafe.
+        assert guard.last_forced == guard.last_changed == (action != guard.base.act(obs))
+        assert guard.last_q == {}  # the base (not a planner) simulates no candidates
         env.step(action)
     assert guard.changes > 0
     guard.close()
@@ -274,6 +277,19 @@ def test_a_fleet_of_its_own_flies_the_rollouts_and_the_base_decides_on_the_env()
     assert guard.checks > 0 and fleet.calls > base.calls > 0
     assert isinstance(make_controller("guard[base=rollout,fleet=heuristic]").fleet,
                       DispatcherController)
+    # A planner's candidate values pass through where its choice stands.
+    planned = make_controller("guard[base=rollout,fleet=heuristic,nominal=true]")
+    env.reset(seed=0)
+    planned.reset(seed=0)
+    planned.bind(env.unwrapped.sim)
+    seen = 0
+    for agent in env.agent_iter(max_iter=60):
+        action = planned.act(env.observe(agent))
+        assert planned.last_changed or planned.last_q == planned.base.last_q
+        seen += bool(planned.last_q)
+        env.step(action)
+    assert seen > 0
+    planned.close()
     for g in (guard, plain, shared):
         g.close()
     env.close()

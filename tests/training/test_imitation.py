@@ -58,6 +58,19 @@ def test_fit_then_learner_drives_a_dagger_day():
         label_day(DayTask(env_cfg, 3, 40, "heuristic", 4, labelled=False))
     with pytest.raises(ValueError, match="teacher"):
         make_teacher("oracle", 4, 0.0, 0)
+    # The guarded planner: the planner decides, the dispatcher flies the guard's rollouts.
+    from agents.controllers.dispatcher import DispatcherController
+    from agents.controllers.guard import GuardedController
+    from agents.controllers.planner import RolloutPlanner
+
+    guarded = make_teacher("guarded_rollout", 4, 3.0, 7)
+    assert isinstance(guarded, GuardedController) and isinstance(guarded.base, RolloutPlanner)
+    assert isinstance(guarded.fleet, DispatcherController)
+    assert (guarded.base.horizon, guarded.base.margin, guarded.seed) == (4, 3.0, 7)
+    day, _ = label_day(DayTask(env_cfg, 3, 40, "guarded_rollout", 4))
+    planned, _ = label_day(DayTask(env_cfg, 3, 40, "rollout", 4))
+    # Within 40 steps of a full fleet no choice loses a vehicle: the planner's labels stand.
+    np.testing.assert_array_equal(day["label"], planned["label"])
 
 
 def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatch):
