@@ -139,6 +139,16 @@ class RolloutPlanner(ScratchRollouts, Controller):
         base: the controller rolled out (default: the expert dispatcher).
         nominal: simulate rollouts without the config's uncertainties (gusts, charger and
             take-off failures, observation noise); ``False``: with them.
+        expect_failures: value a take-off as what it is worth in expectation under the env's
+            ``takeoff_failure_prob`` ``p``: ``(1 - p)`` times its rollout plus ``p`` times the
+            rollout of staying (a failed take-off leaves the vehicle on its port, and the step
+            is the stay's, reward and state alike), so that a take-off whose failure would
+            leave the vehicle in a trap is weighed with that trap. Nominal rollouts only;
+            no extra rollout (staying is a candidate on the ground).
+        rescue: where every candidate loses a vehicle, or only the base's choice is left
+            and it loses one, simulate the legal actions the candidates left out too (a
+            take-off below ``min_takeoff_battery_pct``, a move to another hover spot) and
+            take the best: the filters are there to save rollouts, not to forbid a way out.
 
     Call :meth:`bind` with the simulator of the env it acts in before the first ``act``
     (the episode runners in :mod:`agents.controllers.base` do this for any controller with ``bind``).
@@ -150,7 +160,8 @@ class RolloutPlanner(ScratchRollouts, Controller):
                  min_takeoff_battery_pct: float = 80.0, margin: float = 0.0,
                  min_hover_battery_pct: float = 24.0, stranding_penalty: float = 1000.0,
                  seed: int = 0,
-                 base: Controller | None = None, nominal: bool = True) -> None:
+                 base: Controller | None = None, nominal: bool = True,
+                 expect_failures: bool = False, rescue: bool = False) -> None:
         if horizon < 1:
             raise ValueError(f"horizon must be >= 1 step, got {horizon}")
         if terminal_turns < 0:
@@ -164,6 +175,12 @@ class RolloutPlanner(ScratchRollouts, Controller):
         self.seed = int(seed)
         self.base = base if base is not None else DispatcherController()
         self.nominal = bool(nominal)
+        if expect_failures and not self.nominal:
+            raise ValueError("expect_failures weighs nominal rollouts; with nominal=False the "
+                             "rollouts draw the failures themselves")
+        self.expect_failures = bool(expect_failures)
+        self.rescue = bool(rescue)
+        self._losing: set[int] = set()  # actions whose last rollouts lost a vehicle
         #: The candidates' values of the last decision (empty where none was simulated).
         self.last_q: dict[int, float] = {}
         #: Whether the last decision had a legal action ruled out as unsafe (staying aloft
@@ -211,7 +228,25 @@ class RolloutPlanner(ScratchRollouts, Controller):
                              np.random.default_rng((self.seed, sim.step_count)))
             stranded = self.stranded(scratch) - self.stranded(sim)
             q[a] = total + self.terminal_value(scratch) - self.stranding_penalty * stranded
+            if stranded > 0:
+                self._losing.add(a)
         return q
+
+    def _left_out(self, sim: VertiportSim, actions: list[int]) -> list[int]:
+        """The legal actions of the acting vehicle that ``actions`` leave out."""
+        return [a for a in np.flatnonzero(sim.action_mask(sim.acting)).tolist()
+                if a not in actions]
+
+    def _expected(self, sim: VertiportSim, q: dict[int, float]) -> dict[int, float]:
+        """``q`` with a take-off valued in expectation over its failure (``expect_failures``):
+        a failed take-off's step is the stay's, so its branch is the stay's rollout."""
+        p = sim.cfg.uncertainty.takeoff_failure_prob
+        takeoff, stay = sim.actions.takeoff, sim.actions.stay
+        if not self.expect_failures or p <= 0 or takeoff not in q:
+            return q
+        if stay not in q:
+            q.update(self._simulate(sim, [stay]))
+        return {**q, takeoff: (1.0 - p) * q[takeoff] + p * q[stay]}
 
     @staticmethod
     def stranded(sim: VertiportSim) -> int:
@@ -249,9 +284,16 @@ class RolloutPlanner(ScratchRollouts, Controller):
             raise RuntimeError("RolloutPlanner: the observation is not that of the bound env's "
                                "acting vehicle")
         actions = self._with(self.candidates(sim), fallback)
-        if len(actions) < 2:  # nothing to compare: the base policy's choice, unsimulated
+        left_out = self._left_out(sim, actions) if self.rescue else []
+        if len(actions) < 2 and not left_out:  # nothing to compare: the base's choice
             return fallback
-        q = self.last_q = self._simulate(sim, actions)
+        self._losing = set()
+        q = self._simulate(sim, actions)
+        if left_out and self._losing.issuperset(q):  # no candidate keeps the fleet: widen
+            q.update(self._simulate(sim, left_out))
+        if len(q) < 2:  # the base's choice alone, and it keeps the fleet
+            return fallback
+        q = self.last_q = self._expected(sim, q)
         best = max(q, key=q.get)
         # Keep the dispatcher's choice unless another action is better by more than the margin.
         return fallback if fallback in q and q[fallback] + self.margin >= q[best] else int(best)

@@ -14,6 +14,7 @@ from helpers import seed0_sim
 from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import OUT_OF_SERVICE
+from marl_vertiport.spaces import ObservationBuilder
 
 
 def test_planning_leaves_the_env_untouched_and_acts_legally():
@@ -139,3 +140,68 @@ def test_rollouts_run_on_the_nominal_model_unless_asked_otherwise():
     nominal.close()
     noisy.close()
     env.close()
+
+
+def test_a_failed_takeoff_steps_as_a_stay():
+    # The premise of expect_failures: the failure branch of a take-off is the stay's rollout.
+    sim = seed0_sim(rules=1, **{"uncertainty.takeoff_failure_prob": 1.0})
+    assert sim.acting == 0 and sim.action_mask(0)[sim.actions.takeoff]
+    snap = sim.snapshot()
+    failed, info = sim.step(sim.actions.takeoff)
+    assert info["takeoff_failed"]
+    after_failure = sim.snapshot()
+    sim.restore(snap)
+    stayed, _ = sim.step(sim.actions.stay)
+    assert failed == stayed
+    for key in ("pos", "battery", "status", "node", "node_occupant", "pending_time", "delay"):
+        np.testing.assert_array_equal(after_failure[key], sim.snapshot()[key])
+
+
+def test_expect_failures_weighs_a_takeoff_by_its_failure():
+    env = vertiport_v1.env(config="paper_uncertain")
+    env.reset(seed=5)
+    sim = env.unwrapped.sim
+    p = sim.cfg.uncertainty.takeoff_failure_prob
+    assert p > 0  # the premise: take-offs can fail in this config
+    plain, weighed = RolloutPlanner(horizon=8), RolloutPlanner(horizon=8, expect_failures=True)
+    plain.bind(sim)
+    weighed.bind(sim)
+    dispatcher, compared = DispatcherController(), 0
+    dispatcher.bind(sim)
+    takeoff, stay = sim.actions.takeoff, sim.actions.stay
+    for _ in range(200):
+        obs = env.observe(env.agent_selection)
+        plain.act(obs)
+        weighed.act(obs)
+        if takeoff in plain.last_q:
+            q, w = plain.last_q, weighed.last_q
+            assert w[takeoff] == pytest.approx((1 - p) * q[takeoff] + p * q[stay])
+            assert {a: v for a, v in w.items() if a != takeoff} == {
+                a: v for a, v in q.items() if a != takeoff}
+            compared += 1
+        env.step(dispatcher.act(obs))
+    assert compared >= 5
+    with pytest.raises(ValueError, match="nominal"):
+        RolloutPlanner(nominal=False, expect_failures=True)
+    for planner in (plain, weighed):
+        planner.close()
+    env.close()
+
+
+def test_rescue_simulates_the_filtered_actions_when_every_candidate_loses_a_vehicle():
+    # evtol_1 on a normal port at 20 %, the charger taken: too little charge for a take-off
+    # candidate, and the dispatcher stays, which idles it to empty within the horizon.
+    sim = seed0_sim(rules=1)
+    sim.acting, sim.battery[1] = 1, 20.0
+    obs = ObservationBuilder(sim).observe(1)
+    plain, rescuer = RolloutPlanner(), RolloutPlanner(rescue=True)
+    plain.bind(sim)
+    rescuer.bind(sim)
+    assert plain.act(obs) == sim.actions.stay and plain.last_q == {}  # unsimulated
+    assert rescuer.act(obs) == sim.actions.takeoff
+    assert rescuer.last_q[sim.actions.stay] < -500 < 0 < rescuer.last_q[sim.actions.takeoff]
+    sim.battery[1] = 40.0  # staying keeps the fleet: nothing left out is simulated
+    obs = ObservationBuilder(sim).observe(1)
+    assert rescuer.act(obs) == plain.act(obs) and rescuer.last_q == plain.last_q
+    plain.close()
+    rescuer.close()
