@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.controllers.gcn import GRAPH_ACTOR
-from agents.training.imitation import TEACHERS
+from agents.training.teachers import TEACHERS
 from agents.training.vec_env import CRITIC_INPUTS, ROW_LAYOUTS
 from marl_vertiport.config import (
     LATEST_RULES, RULES_VERSIONS, ConfigError, load_config, load_yaml_dataclass, with_rules,
@@ -30,12 +30,19 @@ class PretrainConfig:
     start_steps: int = 120
     """Steps of each of those episodes."""
     teacher: str = "rollout"
-    """``rollout`` (the look-ahead planner) or ``heuristic`` (the expert dispatcher)."""
+    """``rollout`` (the look-ahead planner), ``guarded_rollout`` or ``heuristic`` (the expert
+    dispatcher): :mod:`agents.training.teachers`."""
     rollout_horizon: int = 40
     """Steps the rollout teacher simulates per candidate action."""
     rollout_margin: float = 3.0
     """Reward by which the rollout teacher's best action must beat the dispatcher's to be the
     label (near-ties keep the dispatcher's choice, which is easier to learn)."""
+    rollout_expect_failures: bool = False
+    """The planner values a take-off in expectation over its failure (``expect_failures`` of
+    :class:`~agents.controllers.planner.RolloutPlanner`; configs with take-off failures)."""
+    rollout_rescue: bool = False
+    """The planner simulates the actions its candidates leave out where every candidate loses a
+    vehicle (``rescue`` of :class:`~agents.controllers.planner.RolloutPlanner`)."""
     workers: int = 2
     """Processes that run demonstration days."""
     epochs: int = 6

@@ -1,17 +1,6 @@
 """Warm start of the shared GCN actor by imitation: behaviour cloning of a teacher, then DAgger.
 
-Teachers (``pretrain.teacher``):
-
-- ``rollout``: the look-ahead planner of :mod:`agents.controllers.planner` (one step of policy improvement
-  over the expert dispatcher, simulating each candidate action ``pretrain.rollout_horizon``
-  steps ahead). It plays clearly better than the dispatcher but reads the simulator and spends
-  tens of milliseconds a decision; the actor learns to take its decisions from observations
-  alone, at a fraction of a millisecond.
-- ``guarded_rollout``: the planner behind the look-ahead guard of :mod:`agents.controllers.guard`
-  (the dispatcher flies the guard's rollouts, with the config's uncertainties): the planner's
-  choice stands unless it loses a vehicle where another action loses fewer. A decision the
-  guard changes is weighted as one whose wrong choice loses a vehicle (``regret_cap``).
-- ``heuristic``: the expert dispatcher itself.
+The teachers (``pretrain.teacher``) are those of :mod:`agents.training.teachers`.
 
 Days of demonstrations run as tasks of the execution layer (:mod:`agents.execution`: local
 worker processes or a Ray cluster), one day per task, through the Gymnasium env:
@@ -44,11 +33,11 @@ from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
 from agents.gcn.padding import to_tensordict as padded_tensordict
 from agents.common.seeds import WARM_START_SEED_BASE, training_seed
+from agents.training.teachers import PLANNER_OPTIONS, TEACHERS, make_teacher  # noqa: F401 (TEACHERS: re-exported)
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).
 ACTOR_GROUPS = (*POLICY_GROUPS, "action_mask")
-TEACHERS = ("rollout", "guarded_rollout", "heuristic")
 
 
 @dataclass(frozen=True)
@@ -61,6 +50,8 @@ class DayTask:
     teacher: str
     rollout_horizon: int
     rollout_margin: float = 0.0
+    planner_options: dict[str, Any] = dataclasses.field(default_factory=dict)
+    """Options of the planner of a ``rollout`` teacher (:data:`~agents.training.teachers.PLANNER_OPTIONS`)."""
     learner: dict[str, Any] | None = None
     """Checkpoint content of the actor that drives (DAgger); ``None``: the teacher drives."""
     noise: float = 0.0
@@ -69,23 +60,6 @@ class DayTask:
     labelled: bool = True
     """Whether the teacher labels the decisions; ``False`` (a day that only scores the learner
     that drives it): no teacher runs and no decisions are returned."""
-
-
-def make_teacher(name: str, rollout_horizon: int, rollout_margin: float, seed: int):
-    from agents.controllers.dispatcher import DispatcherController
-    from agents.controllers.planner import RolloutPlanner
-
-    if name == "rollout":
-        return RolloutPlanner(horizon=rollout_horizon, margin=rollout_margin, seed=seed)
-    if name == "guarded_rollout":
-        from agents.controllers.guard import GuardedController
-
-        return GuardedController(
-            base=RolloutPlanner(horizon=rollout_horizon, margin=rollout_margin, seed=seed),
-            fleet=DispatcherController(), seed=seed)
-    if name == "heuristic":
-        return DispatcherController()
-    raise ValueError(f"teacher {name!r}: use one of {TEACHERS}")
 
 
 class DecisionLog:
@@ -175,8 +149,8 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     if not task.labelled and task.learner is None:
         raise ValueError("a day without labels needs a learner to drive it")
     env = VertiportEnv(config=from_dict(task.env_config))
-    teacher = (make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed)
-               if task.labelled else None)
+    teacher = (make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed,
+                            **task.planner_options) if task.labelled else None)
     learner = GCNController(task.learner) if task.learner is not None else None
     log = DecisionLog()
     driver = Demonstrator(teacher, learner, task.noise, np.random.default_rng([task.seed, 1]), log)
@@ -337,8 +311,9 @@ def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: 
                   for i in range(pre.low_battery_starts)]
         lengths += [pre.start_steps] * len(levels)
         configs += [_with_battery(scenarios[i % len(scenarios)], pct) for i, pct in enumerate(levels)]
+    options = {k: True for k in PLANNER_OPTIONS if getattr(pre, f"rollout_{k}")}
     return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
-                    pre.rollout_margin, learner, pre.noise if d >= pre.days else 0.0,
+                    pre.rollout_margin, options, learner, pre.noise if d >= pre.days else 0.0,
                     labelled=not last)
             for d, (conf, steps) in enumerate(zip(configs, lengths))]
 

@@ -71,6 +71,13 @@ def test_fit_then_learner_drives_a_dagger_day():
     planned, _ = label_day(DayTask(env_cfg, 3, 40, "rollout", 4))
     # Within 40 steps of a full fleet no choice loses a vehicle: the planner's labels stand.
     np.testing.assert_array_equal(day["label"], planned["label"])
+    # The planner's options reach the planner, behind the guard too; others are refused.
+    robust = make_teacher("guarded_rollout", 4, 3.0, 7, expect_failures=True, rescue=True)
+    assert robust.base.expect_failures and robust.base.rescue
+    plain = make_teacher("rollout", 4, 3.0, 7)
+    assert not plain.expect_failures and not plain.rescue
+    with pytest.raises(ValueError, match="planner options"):
+        make_teacher("rollout", 4, 3.0, 7, nominal=False)
 
 
 def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatch):
@@ -129,6 +136,11 @@ def test_round_tasks_mix_seeds_noise_and_low_batteries():
     env_cfg = to_dict(load_config("paper"))
     first = round_tasks(cfg, env_cfg, 0, None, last=False)
     assert [t.steps for t in first] == [1440] * 2 + [120] * 8
+    assert all(t.planner_options == {} for t in first)
+    robust = TrainConfig(pretrain=build_dataclass(type(TrainConfig().pretrain), {
+        "days": 1, "rollout_expect_failures": True, "rollout_rescue": True}))
+    assert {frozenset(t.planner_options) for t in round_tasks(robust, env_cfg, 0, None, False)} == {
+        frozenset({"expect_failures", "rescue"})}
     assert [t.noise for t in first] == [0.0] * 2 + [0.1] * 8  # full days score the fits: no noise
     assert [t.env_config["battery"]["initial_pct"] for t in first] == [100.0] * 5 + [10, 30, 10, 30, 10]
     scoring = round_tasks(cfg, env_cfg, 3, {"weights": 1}, last=True)
