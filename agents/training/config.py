@@ -54,6 +54,10 @@ class PretrainConfig:
     learning_rate: float = 1e-3
     dagger_rounds: int = 0
     """Rounds of DAgger after behaviour cloning: the actor drives, the teacher labels."""
+    dagger_epochs: int = 0
+    """Passes over all the decisions so far after each DAgger round, the fit going on from the
+    last one's weights (0: ``epochs``); fewer than ``epochs`` keep the rounds' fits, which grow
+    with the data, within the run's time."""
     noise: float = 0.0
     """Probability that the driver's action at a step with a choice of a day start is replaced
     by a uniformly drawn legal action (the label stays the teacher's): the data then covers the
@@ -222,8 +226,9 @@ class TrainConfig:
             (self.ensemble.days >= 1 and self.ensemble.epochs >= 1 and self.ensemble.batch_size >= 1,
              "ensemble", "days, epochs and batch_size must be >= 1"),
             (self.ensemble.learning_rate > 0, "ensemble.learning_rate", "must be > 0"),
-            (self.pretrain.days >= 0 and self.pretrain.epochs >= 0 and self.pretrain.dagger_rounds >= 0,
-             "pretrain", "days, epochs and dagger_rounds must be >= 0"),
+            (min(self.pretrain.days, self.pretrain.epochs, self.pretrain.dagger_rounds,
+                 self.pretrain.dagger_epochs) >= 0,
+             "pretrain", "days, epochs, dagger_rounds and dagger_epochs must be >= 0"),
             (self.pretrain.day_steps >= 1, "pretrain.day_steps", "must be >= 1"),
             (self.pretrain.starts >= 0 and self.pretrain.start_steps >= 1, "pretrain.starts",
              "starts must be >= 0 and start_steps >= 1"),

@@ -405,7 +405,9 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, "
             f"{'no labels' if last else f'the {pre.teacher} teacher labels'} "
             f"({where})")
+        started = time.monotonic()
         new, metrics = collect(tasks, backend, log, tag, sizes)
+        collected = time.monotonic()
         full = [m for m in metrics if m["steps"] == pre.day_steps]
         days = [day_score(m, cfg.lost_vehicle_penalty) for m in full] or [float("nan")]
         if learner is None:
@@ -426,11 +428,14 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                 k: np.concatenate([state["data"][k], new[k]]) for k in state["data"]}
             actor_device = next(actor.parameters()).device
             actor.to("cpu")
-            stats.update(fit_actor(actor, state["data"], pre.epochs, pre.batch_size,
+            epochs = pre.dagger_epochs if round_ and pre.dagger_epochs else pre.epochs
+            stats.update(fit_actor(actor, state["data"], epochs, pre.batch_size,
                                    pre.learning_rate, cfg.seed + round_, log, tag, pre.regret_cap))
             actor.to(actor_device)
             fits.append(_learner(actor, env_config, cfg))
             record.update(cross_entropy=stats["cross_entropy"], accuracy=stats["accuracy"])
+        log(f"  {tag}: days {collected - started:.0f} s"
+            + ("" if last else f", fit {time.monotonic() - collected:.0f} s"))
         state["records"].append(record)
         state["next_round"] = round_ + 1
         if state_path is not None:

@@ -31,8 +31,14 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     teacher = "rollout" if mode == "multi_agent" else "heuristic"
     cfg = tiny_config(mode, pretrain={"days": 2, "day_steps": 24, "teacher": teacher,
                                       "rollout_horizon": 4, "workers": 1, "epochs": 1,
-                                      "batch_size": 64, "learning_rate": 1e-3, "dagger_rounds": 1})
-    final = train(cfg, tmp_path, log=lambda *_: None, evaluate=False)
+                                      "batch_size": 64, "learning_rate": 1e-3, "dagger_rounds": 1,
+                                      "dagger_epochs": 2})
+    lines: list[str] = []
+    final = train(cfg, tmp_path, log=lambda line, *_: lines.append(str(line)), evaluate=False)
+    # Behaviour cloning fits `epochs` passes, the DAgger round `dagger_epochs`; each round is timed.
+    assert any("demonstrations epoch 1/1" in line for line in lines)
+    assert any("DAgger round 1 epoch 2/2" in line for line in lines)
+    assert any(line.strip().startswith("DAgger round 1: days") for line in lines)
     assert final.name == "model_1.pt" and (tmp_path / "model_0.pt").exists()
     warm = torch.load(tmp_path / "model_warmstart.pt", weights_only=True)["infos"]["warm_start"]
     # Two fits (behaviour cloning, one DAgger round), each scored; the best one is kept.
