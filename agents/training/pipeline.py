@@ -97,6 +97,7 @@ def warm_start_stage(runner, cfg: TrainConfig, env_cfg, run_dir: Path, resume: b
                      backend: Backend | None) -> list[dict[str, float]]:
     """Imitation, then (``ensemble.fits``) the ensemble's distillation and (``warm_start_
     temperature``) the sharpening of the actor PPO starts from; ``model_warmstart.pt``,
+    ``model_fit<k>.pt`` (with DAgger: fit 0 is behaviour cloning's, fit k the k-th round's),
     ``model_refit<k>.pt`` and ``model_distilled.pt`` are written on the way. Returns the rows
     of ``warmstart.csv``."""
     # Under torchrun each rank warm-starts on its own seeds; rank 0 writes the curves.
@@ -121,6 +122,9 @@ def warm_start_stage(runner, cfg: TrainConfig, env_cfg, run_dir: Path, resume: b
     if not stats:
         return warm_rows
     runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
+    if rank == 0 and cfg.pretrain.dagger_rounds:  # each round's fit, to compare them paired
+        for k, content in enumerate(load_warm_start_state(state_path)["fits"]):
+            write_torch_atomic(run_dir / f"model_fit{k}.pt", content)
     if cfg.ensemble.fits:
         ens_stats, refits = distil_ensemble(
             runner.alg.actor, cfg, warm_envs, load_warm_start_state(state_path)["data"],
