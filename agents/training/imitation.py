@@ -33,7 +33,9 @@ from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
 from agents.gcn.padding import to_tensordict as padded_tensordict
 from agents.common.seeds import WARM_START_SEED_BASE, training_seed
-from agents.training.teachers import PLANNER_OPTIONS, TEACHERS, make_teacher  # noqa: F401 (TEACHERS: re-exported)
+from agents.training.teachers import (  # noqa: F401 (TEACHERS: re-exported)
+    PLANNER_OPTIONS, TEACHERS, make_teacher,
+)
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).
@@ -51,7 +53,8 @@ class DayTask:
     rollout_horizon: int
     rollout_margin: float = 0.0
     planner_options: dict[str, Any] = dataclasses.field(default_factory=dict)
-    """Options of the planner of a ``rollout`` teacher (:data:`~agents.training.teachers.PLANNER_OPTIONS`)."""
+    """Options of the planner of a rollout teacher
+    (:data:`~agents.training.teachers.PLANNER_OPTIONS`)."""
     learner: dict[str, Any] | None = None
     """Checkpoint content of the actor that drives (DAgger); ``None``: the teacher drives."""
     noise: float = 0.0

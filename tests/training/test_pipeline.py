@@ -46,7 +46,7 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     assert warm["chosen_fit"] == max((0, 1), key=lambda k: warm[f"fit_{k}_score"])
     kept = GCNController(tmp_path / f"model_fit{int(warm['chosen_fit'])}.pt").actor.state_dict()
     for key, value in GCNController(tmp_path / "model_warmstart.pt").actor.state_dict().items():
-        torch.testing.assert_close(kept[key], value)  # every fit is written; the kept one is the warm start
+        torch.testing.assert_close(kept[key], value)  # every fit is written; the kept one warm-starts
     assert not (tmp_path / "model_fit2.pt").exists()
     assert (tmp_path / "curves.csv").exists() and (tmp_path / "learning_curves.png").exists()
     assert not list(tmp_path.glob("*.tmp"))
