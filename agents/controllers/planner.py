@@ -180,7 +180,6 @@ class RolloutPlanner(ScratchRollouts, Controller):
                              "rollouts draw the failures themselves")
         self.expect_failures = bool(expect_failures)
         self.rescue = bool(rescue)
-        self._losing: set[int] = set()  # actions whose last rollouts lost a vehicle
         #: The candidates' values of the last decision (empty where none was simulated).
         self.last_q: dict[int, float] = {}
         #: Whether the last decision had a legal action ruled out as unsafe (staying aloft
@@ -208,7 +207,7 @@ class RolloutPlanner(ScratchRollouts, Controller):
     def q_values(self, sim: VertiportSim, also: int | None = None) -> dict[int, float]:
         """Sum of rewards over the horizon for each candidate action of the acting vehicle, and
         for ``also`` (the base policy's own choice, such as a holding move) if it is not one."""
-        return self._simulate(sim, self._with(self.candidates(sim), also))
+        return self._simulate(sim, self._with(self.candidates(sim), also))[0]
 
     @staticmethod
     def _with(actions: list[int], also: int | None) -> list[int]:
@@ -216,21 +215,23 @@ class RolloutPlanner(ScratchRollouts, Controller):
             actions.append(int(also))
         return actions
 
-    def _simulate(self, sim: VertiportSim, actions: list[int]) -> dict[int, float]:
+    def _simulate(self, sim: VertiportSim,
+                  actions: list[int]) -> tuple[dict[int, float], set[int]]:
         """The value of each of ``actions`` (see :meth:`q_values`; each rollout is
-        :func:`roll_out`)."""
+        :func:`roll_out`), and those of them whose rollout lost a vehicle."""
         scratch, builder, base = self._scratch, self._builder, self.base
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
         q: dict[int, float] = {}
+        losing: set[int] = set()
         for a in actions:
             total = roll_out(scratch, builder, base, snap, a, self.horizon,
                              np.random.default_rng((self.seed, sim.step_count)))
             stranded = self.stranded(scratch) - self.stranded(sim)
             q[a] = total + self.terminal_value(scratch) - self.stranding_penalty * stranded
             if stranded > 0:
-                self._losing.add(a)
-        return q
+                losing.add(a)
+        return q, losing
 
     def _left_out(self, sim: VertiportSim, actions: list[int]) -> list[int]:
         """The legal actions of the acting vehicle that ``actions`` leave out."""
@@ -245,7 +246,7 @@ class RolloutPlanner(ScratchRollouts, Controller):
         if not self.expect_failures or p <= 0 or takeoff not in q:
             return q
         if stay not in q:
-            q.update(self._simulate(sim, [stay]))
+            q.update(self._simulate(sim, [stay])[0])
         return {**q, takeoff: (1.0 - p) * q[takeoff] + p * q[stay]}
 
     @staticmethod
@@ -287,10 +288,9 @@ class RolloutPlanner(ScratchRollouts, Controller):
         left_out = self._left_out(sim, actions) if self.rescue else []
         if len(actions) < 2 and not left_out:  # nothing to compare: the base's choice
             return fallback
-        self._losing = set()
-        q = self._simulate(sim, actions)
-        if left_out and self._losing.issuperset(q):  # no candidate keeps the fleet: widen
-            q.update(self._simulate(sim, left_out))
+        q, losing = self._simulate(sim, actions)
+        if left_out and losing.issuperset(q):  # no candidate keeps the fleet: widen
+            q.update(self._simulate(sim, left_out)[0])
         if len(q) < 2:  # the base's choice alone, and it keeps the fleet
             return fallback
         q = self.last_q = self._expected(sim, q)

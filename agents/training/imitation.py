@@ -33,9 +33,7 @@ from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
 from agents.gcn.padding import to_tensordict as padded_tensordict
 from agents.common.seeds import WARM_START_SEED_BASE, training_seed
-from agents.training.teachers import (  # noqa: F401 (TEACHERS: re-exported)
-    PLANNER_OPTIONS, TEACHERS, make_teacher,
-)
+from agents.training.teachers import PLANNER_OPTIONS, make_teacher
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 
 #: Observation groups the actor reads (the first three are its features, the last its mask).

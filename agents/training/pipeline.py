@@ -122,12 +122,14 @@ def warm_start_stage(runner, cfg: TrainConfig, env_cfg, run_dir: Path, resume: b
     if not stats:
         return warm_rows
     runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
+    saved = (load_warm_start_state(state_path)
+             if cfg.ensemble.fits or rank == 0 and cfg.pretrain.dagger_rounds else None)
     if rank == 0 and cfg.pretrain.dagger_rounds:  # each round's fit, to compare them paired
-        for k, content in enumerate(load_warm_start_state(state_path)["fits"]):
+        for k, content in enumerate(saved["fits"]):
             write_torch_atomic(run_dir / f"model_fit{k}.pt", content)
     if cfg.ensemble.fits:
         ens_stats, refits = distil_ensemble(
-            runner.alg.actor, cfg, warm_envs, load_warm_start_state(state_path)["data"],
+            runner.alg.actor, cfg, warm_envs, saved["data"],
             padded_sizes(warm_envs), log=log, backend=backend)
         if rank == 0:
             for k, content in enumerate(refits, start=1):
