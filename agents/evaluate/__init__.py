@@ -7,8 +7,9 @@ One job per module, each importing only those listed before it:
 * ``settings``: what to run (settings, suites, overrides) and what a run holds;
 * ``episodes``: the execution layer (this process or a pool of worker processes);
 * ``stats``: bootstrap intervals and the summary rows;
-* ``paired``: two agents compared day by day (a command of its own), the unforced losses;
-* ``unforced``: the unforced losses in the summary, across the agents that played a day;
+* ``unforced``: the unforced losses of a day, and their rows in the summary;
+* ``paired``: two agents compared day by day (a command of its own; the package does not
+  import it, so ``python -m agents.evaluate.paired`` runs it cleanly);
 * ``run``: input checks, then running and summarising;
 * ``tables``: the console table, CSV and JSON;
 * ``figures``: the case-study and action-distribution charts;

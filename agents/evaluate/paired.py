@@ -39,13 +39,10 @@ import numpy as np
 
 from agents.common.files import write_atomic
 from agents.evaluate.stats import bootstrap_ci
+from agents.evaluate.unforced import DEFAULT_REFERENCE, Day, unforced_losses
 
 #: Columns of ``episodes.csv`` this comparison reads.
 NEEDED = ("agent", "config", "seed", "total_reward", "stranded_air", "stranded_ground", "collisions")
-Day = tuple[str, int]  # (case, seed)
-#: The reference set of unforced losses when ``--reference`` is not given: those of these
-#: agents the files hold (the dispatcher, the look-ahead planner and the look-ahead guard).
-DEFAULT_REFERENCE = ("heuristic", "rollout", "guard")
 
 
 class PairedInputError(ValueError):
@@ -83,22 +80,6 @@ def read_episodes(paths: Sequence[str | Path]) -> dict[str, dict[Day, dict[str, 
         except UnicodeDecodeError:
             raise PairedInputError(f"{path}: not a text file") from None
     return out
-
-
-def unforced_losses(episodes: dict[str, dict[Day, dict[str, float]]], agent: str, day: Day,
-                    reference: Sequence[str]) -> float | None:
-    """``agent``'s *unforced* losses on ``day``: the vehicles it lost beyond the fewest any
-    agent of ``reference`` lost on that day, ``max(0, lost(agent) - min_r lost(r))``; ``None``
-    when no reference agent played the day. A loss every reference agent also suffers is
-    forced by the day (its traffic, its failures), not by the controller."""
-    best = [_lost(episodes[r][day]) for r in reference if day in episodes.get(r, {})]
-    if not best:
-        return None
-    return max(0.0, _lost(episodes[agent][day]) - min(best))
-
-
-def _lost(values: dict[str, float]) -> float:
-    return values["stranded_air"] + values["stranded_ground"]
 
 
 def compare(episodes: dict[str, dict[Day, dict[str, float]]],

@@ -2,9 +2,9 @@
 
 On each day ``(case, seed)``, an agent's *unforced* losses are the vehicles it lost beyond the
 fewest that any agent of a reference set lost on the same day
-(:func:`agents.evaluate.paired.unforced_losses`); a loss every reference agent also suffers is
+(:func:`unforced_losses`); a loss every reference agent also suffers is
 forced by the day. The reference set is the dispatcher, the look-ahead planner and the
-look-ahead guard (:data:`~agents.evaluate.paired.DEFAULT_REFERENCE`), those of them the
+look-ahead guard (:data:`DEFAULT_REFERENCE`), those of them the
 evaluation plays.
 
 The number needs other agents' days, so it is made once every day is played: a row per agent and
@@ -19,9 +19,29 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 from agents.evaluate.metrics import DERIVED_AFTER, UNFORCED
-from agents.evaluate.paired import DEFAULT_REFERENCE, Day, unforced_losses
 from agents.evaluate.settings import EpisodeRecord, EvalSettings
 from agents.evaluate.stats import describe
+
+Day = tuple[str, int]  # (case, seed)
+#: The reference set of unforced losses when ``--reference`` is not given: those of these
+#: agents the files hold (the dispatcher, the look-ahead planner and the look-ahead guard).
+DEFAULT_REFERENCE = ("heuristic", "rollout", "guard")
+
+
+def unforced_losses(episodes: dict[str, dict[Day, dict[str, float]]], agent: str, day: Day,
+                    reference: Sequence[str]) -> float | None:
+    """``agent``'s *unforced* losses on ``day``: the vehicles it lost beyond the fewest any
+    agent of ``reference`` lost on that day, ``max(0, lost(agent) - min_r lost(r))``; ``None``
+    when no reference agent played the day. A loss every reference agent also suffers is
+    forced by the day (its traffic, its failures), not by the controller."""
+    best = [_lost(episodes[r][day]) for r in reference if day in episodes.get(r, {})]
+    if not best:
+        return None
+    return max(0.0, _lost(episodes[agent][day]) - min(best))
+
+
+def _lost(values: dict[str, float]) -> float:
+    return values["stranded_air"] + values["stranded_ground"]
 
 
 def reference_agents(settings: EvalSettings) -> list[str]:

@@ -106,3 +106,18 @@ def test_cli_takes_the_reference_agents_the_files_hold(tmp_path, capsys):
     assert "(reference: a)" in table and "0.00 → 0.50 (8 days)" in table
     assert main([str(path), "--pair", "a", "b", "--reference", "zz"]) == 2
     assert "reference agent 'zz'" in capsys.readouterr().err
+
+
+
+def test_the_command_runs_without_a_warning():
+    """``python -m agents.evaluate.paired`` imports the package first; were ``paired`` among
+    the package's imports, runpy would warn that the module was imported before it ran."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m",
+                          "agents.evaluate.paired", "--help"], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "RuntimeWarning" not in out.stderr
+    assert "--pair BASE CANDIDATE" in out.stdout
