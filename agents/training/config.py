@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.controllers.gcn import GRAPH_ACTOR
+from agents.training.fit_selection import KEEP_RULES
 from agents.training.teachers import TEACHERS
 from agents.training.vec_env import CRITIC_INPUTS, ROW_LAYOUTS
 from marl_vertiport.config import (
@@ -68,6 +69,11 @@ class PretrainConfig:
     ``low_battery_pct``: the teacher shows what to do when a charge cannot be had for all."""
     low_battery_pct: tuple[float, ...] = (10.0, 20.0, 30.0, 45.0)
     """Initial battery levels (%) of those starts."""
+    keep: str = "round"
+    """Which fit the warm start keeps (with DAgger rounds): ``round``, the best by the mean
+    score of the full days it drove in the round after its fit (each fit on days of its own);
+    ``paired``, the best by its score on the last round's full days, which every fit drives
+    (the same days for all: more days driven, a fairer comparison); ``last``, the last fit."""
 
 
 @dataclass(frozen=True)
@@ -236,6 +242,7 @@ class TrainConfig:
             (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
             (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
             (self.pretrain.regret_cap >= 0, "pretrain.regret_cap", "must be >= 0"),
+            (self.pretrain.keep in KEEP_RULES, "pretrain.keep", f"one of {', '.join(KEEP_RULES)}"),
             (self.pretrain.days + self.pretrain.starts + self.pretrain.low_battery_starts <= 100,
              "pretrain", "days + starts + low_battery_starts must be <= 100 (seeds of a round)"),
             (0.0 <= self.pretrain.noise < 1.0, "pretrain.noise", "must lie in [0, 1)"),

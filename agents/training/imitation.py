@@ -12,7 +12,8 @@ driver's actions is replaced by random legal ones (see :func:`round_tasks`). Onl
 (two or more legal actions) are kept: the others teach nothing. In round 0 the teacher drives;
 in each DAgger round the current actor drives (greedily) and the teacher labels the states the
 actor visits, and the actor is refit on everything collected so far. A last round of full days
-driven by the last fit scores it; nothing is fit on it, so no teacher runs there.
+driven by the last fit scores it (with ``pretrain.keep: paired``, every fit drives the same
+days); nothing is fit on it, so no teacher runs there.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
 from agents.gcn.padding import to_tensordict as padded_tensordict
 from agents.common.seeds import WARM_START_SEED_BASE, training_seed
+from agents.training.fit_selection import day_score, kept_fit
 from agents.training.teachers import PLANNER_OPTIONS, make_teacher
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 
@@ -335,12 +337,6 @@ def padded_sizes(env_config: dict[str, Any] | list[dict[str, Any]]) -> tuple[int
     return max(Layout.from_config(c).n_nodes for c in built), max(c.fleet_size for c in built)
 
 
-def day_score(metrics: dict[str, Any], lost_vehicle_penalty: float) -> float:
-    """What a fit is scored by on a day it drove: the paper's total reward minus
-    ``lost_vehicle_penalty`` per vehicle lost (the training reward's lost-vehicle term)."""
-    return float(metrics["total_reward"]) - lost_vehicle_penalty * float(metrics["stranded"])
-
-
 def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                log: Callable[[str], None] = print,
                state_path: Path | None = None,
@@ -397,10 +393,12 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     for round_ in range(state["next_round"], pre.dagger_rounds + 2):
         last = round_ == pre.dagger_rounds + 1  # scores the last fit; nothing is refit
         learner = fits[-1] if fits else None
-        tasks = round_tasks(cfg, env_config, round_, learner, last)
-        tag = ("scoring the last fit" if last else "demonstrations" if round_ == 0
-               else f"DAgger round {round_}")
-        log(f"{tag}: {pre.days} days and {len(tasks) - pre.days} day starts of {pre.start_steps} "
+        drivers = fits if last and pre.keep == "paired" else [learner]
+        tasks = [t for d in drivers for t in round_tasks(cfg, env_config, round_, d, last)]
+        tag = ("scoring the last fit" if len(drivers) == 1 and last else
+               f"scoring the {len(drivers)} fits on the same days" if last else
+               "demonstrations" if round_ == 0 else f"DAgger round {round_}")
+        log(f"{tag}: {pre.days} days and {len(tasks) // len(drivers) - pre.days} day starts of {pre.start_steps} "
             f"steps ({0 if last else pre.low_battery_starts} with low batteries), "
             f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, "
@@ -409,6 +407,14 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         started = time.monotonic()
         new, metrics = collect(tasks, backend, log, tag, sizes)
         collected = time.monotonic()
+        per_driver = len(tasks) // len(drivers)
+        if len(drivers) > 1:  # paired: each fit's score on the days every fit drove
+            state["paired_scores"] = [float(np.mean([
+                day_score(m, cfg.lost_vehicle_penalty) for m in metrics[k * per_driver:(k + 1) * per_driver]
+                if m["steps"] == pre.day_steps] or [float("nan")])) for k in range(len(drivers))]
+            log("  fits scored on the same days: " + ", ".join(
+                f"fit {k} {v:.0f}" for k, v in enumerate(state["paired_scores"])))
+        metrics = metrics[-per_driver:]  # the last fit's days make the round's record
         full = [m for m in metrics if m["steps"] == pre.day_steps]
         days = [day_score(m, cfg.lost_vehicle_penalty) for m in full] or [float("nan")]
         if learner is None:
@@ -422,8 +428,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                   "env_steps": float(state["env_steps"]),
                   **{k: float(np.mean([m[k] for m in full])) if full else float("nan")
                      for k in ROUND_METRICS}}
-        if last:  # the fit kept for PPO, by the round whose full days it drove
-            record["kept_round"] = float(int(np.nanargmax(scores)) + 1)
+        if last:  # the fit kept for PPO: the round it drove in after its fit
+            record["kept_round"] = float(kept_fit(pre.keep, scores, state.get("paired_scores")) + 1)
         else:
             state["data"] = new if state["data"] is None else {
                 k: np.concatenate([state["data"][k], new[k]]) for k in state["data"]}
@@ -443,10 +449,14 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
             save_warm_start_state(state_path, state)
         if on_round is not None:
             on_round(record)
-    best = int(np.nanargmax(scores))
+    paired = state.get("paired_scores")
+    best = kept_fit(pre.keep, scores, paired)
     actor.load_state_dict(fits[best]["actor_state_dict"])
     stats.update({f"fit_{k}_score": v for k, v in enumerate(scores)}, chosen_fit=float(best))
-    log(f"warm start: keeping fit {best} of {len(fits)} (score {scores[best]:.0f})")
+    if paired:
+        stats.update({f"fit_{k}_paired_score": v for k, v in enumerate(paired)})
+    log(f"warm start: keeping fit {best} of {len(fits)} ({pre.keep}: score "
+        f"{(paired if pre.keep == 'paired' else scores)[best]:.0f})")
     return stats
 
 

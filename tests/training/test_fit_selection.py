@@ -1,0 +1,59 @@
+"""Which warm-start fit goes on to PPO (agents/training/fit_selection.py, ``pretrain.keep``):
+each rule's choice, and the paired rule's scores are every fit's own days, the same for all."""
+
+import numpy as np
+import pytest
+import torch
+
+from agents.controllers.gcn import GCNController
+from agents.gcn.features import feature_names
+from agents.gcn.models import GraphActor
+from agents.training.config import TrainConfig
+from agents.training.fit_selection import day_score, kept_fit
+from agents.training.imitation import label_day, load_warm_start_state, round_tasks, warm_start
+from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
+from marl_vertiport.vertiport_v1 import raw_env
+
+
+def test_each_rule_keeps_its_fit():
+    scores, paired = [10.0, 30.0, 20.0], [25.0, 5.0, 15.0]
+    assert kept_fit("round", scores, paired) == 1
+    assert kept_fit("paired", scores, paired) == 0
+    assert kept_fit("last", scores, paired) == 2
+    assert kept_fit("round", [float("nan"), 1.0]) == 1  # a fit with no full day is never kept
+    with pytest.raises(ValueError, match="same days"):
+        kept_fit("paired", scores, paired[:2])
+    with pytest.raises(ConfigError, match="pretrain.keep"):
+        build_dataclass(TrainConfig, {**to_dict(TrainConfig()), "pretrain": {"keep": "best"}})
+
+
+def test_paired_scores_are_every_fit_on_the_last_rounds_days(tmp_path):
+    torch.manual_seed(0)
+    env_cfg = to_dict(load_config("paper"))
+    cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
+                                        "model": {"hidden": 16, "hidden_dims": [32]},
+                                        "pretrain": {"days": 2, "day_steps": 40, "starts": 0,
+                                                     "low_battery_starts": 0, "epochs": 1,
+                                                     "teacher": "heuristic", "workers": 1,
+                                                     "batch_size": 64, "dagger_rounds": 1,
+                                                     "keep": "paired"}})
+    probe = raw_env(config=load_config("paper"))
+    probe.reset(seed=0)
+    example = GCNController._tensors(probe.observe("evtol_0"))
+    probe.close()
+    actor = GraphActor(example, {"actor": ["port_nodes", "evtol_nodes", "self"]}, "actor", 1,
+                       feature_names("observation"), hidden=16, hidden_dims=[32])
+    lines: list[str] = []
+    stats = warm_start(actor, cfg, env_cfg, log=lines.append, state_path=tmp_path / "state.pt")
+    assert any(line.startswith("scoring the 2 fits on the same days") for line in lines)
+    fits = load_warm_start_state(tmp_path / "state.pt")["fits"]
+    # Each fit drives the last round's days by itself: its paired score is their mean score.
+    for k, fit in enumerate(fits):
+        days = [label_day(t)[1] for t in round_tasks(cfg, env_cfg, 2, fit, last=True)]
+        assert stats[f"fit_{k}_paired_score"] == pytest.approx(
+            np.mean([day_score(m, cfg.lost_vehicle_penalty) for m in days]))
+    assert stats["fit_1_paired_score"] == pytest.approx(stats["fit_1_score"])  # the last fit's days
+    assert stats["chosen_fit"] == kept_fit("paired", [stats["fit_0_score"], stats["fit_1_score"]],
+                                           [stats["fit_0_paired_score"], stats["fit_1_paired_score"]])
+    for key, value in actor.state_dict().items():  # the actor holds the kept fit
+        torch.testing.assert_close(value, fits[int(stats["chosen_fit"])]["actor_state_dict"][key])
