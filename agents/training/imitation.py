@@ -398,7 +398,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         tag = ("scoring the last fit" if len(drivers) == 1 and last else
                f"scoring the {len(drivers)} fits on the same days" if last else
                "demonstrations" if round_ == 0 else f"DAgger round {round_}")
-        log(f"{tag}: {pre.days} days and {len(tasks) // len(drivers) - pre.days} day starts of {pre.start_steps} "
+        per_driver = len(tasks) // len(drivers)
+        log(f"{tag}: {pre.days} days and {per_driver - pre.days} day starts of {pre.start_steps} "
             f"steps ({0 if last else pre.low_battery_starts} with low batteries), "
             f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, "
@@ -407,11 +408,11 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         started = time.monotonic()
         new, metrics = collect(tasks, backend, log, tag, sizes)
         collected = time.monotonic()
-        per_driver = len(tasks) // len(drivers)
         if len(drivers) > 1:  # paired: each fit's score on the days every fit drove
+            chunks = [metrics[k * per_driver:(k + 1) * per_driver] for k in range(len(drivers))]
             state["paired_scores"] = [float(np.mean([
-                day_score(m, cfg.lost_vehicle_penalty) for m in metrics[k * per_driver:(k + 1) * per_driver]
-                if m["steps"] == pre.day_steps] or [float("nan")])) for k in range(len(drivers))]
+                day_score(m, cfg.lost_vehicle_penalty) for m in chunk
+                if m["steps"] == pre.day_steps] or [float("nan")])) for chunk in chunks]
             log("  fits scored on the same days: " + ", ".join(
                 f"fit {k} {v:.0f}" for k, v in enumerate(state["paired_scores"])))
         metrics = metrics[-per_driver:]  # the last fit's days make the round's record
@@ -429,7 +430,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                   **{k: float(np.mean([m[k] for m in full])) if full else float("nan")
                      for k in ROUND_METRICS}}
         if last:  # the fit kept for PPO: the round it drove in after its fit
-            record["kept_round"] = float(kept_fit(pre.keep, scores, state.get("paired_scores")) + 1)
+            kept = kept_fit(pre.keep, scores, state.get("paired_scores"))
+            record["kept_round"] = float(kept + 1)
         else:
             state["data"] = new if state["data"] is None else {
                 k: np.concatenate([state["data"][k], new[k]]) for k in state["data"]}

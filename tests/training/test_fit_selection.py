@@ -53,7 +53,8 @@ def test_paired_scores_are_every_fit_on_the_last_rounds_days(tmp_path):
         assert stats[f"fit_{k}_paired_score"] == pytest.approx(
             np.mean([day_score(m, cfg.lost_vehicle_penalty) for m in days]))
     assert stats["fit_1_paired_score"] == pytest.approx(stats["fit_1_score"])  # the last fit's days
-    assert stats["chosen_fit"] == kept_fit("paired", [stats["fit_0_score"], stats["fit_1_score"]],
-                                           [stats["fit_0_paired_score"], stats["fit_1_paired_score"]])
+    scores = [stats[f"fit_{k}_score"] for k in (0, 1)]
+    paired = [stats[f"fit_{k}_paired_score"] for k in (0, 1)]
+    assert stats["chosen_fit"] == kept_fit("paired", scores, paired)
     for key, value in actor.state_dict().items():  # the actor holds the kept fit
         torch.testing.assert_close(value, fits[int(stats["chosen_fit"])]["actor_state_dict"][key])
