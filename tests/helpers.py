@@ -71,3 +71,19 @@ def tiny_config(mode: str, **extra):
                 evaluation={"episodes": 0, "agents": []})
     base.update(extra)
     return build_dataclass(TrainConfig, base)
+
+
+def small_actor(hidden: int = 16, hidden_dims: tuple[int, ...] = (32,)):
+    """A small GCN actor of the paper's vertiport, shaped by an observation of its env."""
+    from agents.controllers.gcn import GCNController
+    from agents.gcn.features import feature_names
+    from agents.gcn.models import GraphActor
+    from marl_vertiport.config import load_config
+    from marl_vertiport.vertiport_v1 import raw_env
+
+    probe = raw_env(config=load_config("paper"))
+    probe.reset(seed=0)
+    example = GCNController._tensors(probe.observe("evtol_0"))
+    probe.close()
+    return GraphActor(example, {"actor": ["port_nodes", "evtol_nodes", "self"]}, "actor", 1,
+                      feature_names("observation"), hidden=hidden, hidden_dims=list(hidden_dims))

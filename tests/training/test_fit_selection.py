@@ -5,14 +5,12 @@ import numpy as np
 import pytest
 import torch
 
-from agents.controllers.gcn import GCNController
-from agents.gcn.features import feature_names
-from agents.gcn.models import GraphActor
 from agents.training.config import TrainConfig
 from agents.training.fit_selection import day_score, kept_fit
 from agents.training.imitation import label_day, load_warm_start_state, round_tasks, warm_start
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
-from marl_vertiport.vertiport_v1 import raw_env
+
+from helpers import small_actor
 
 
 def test_each_rule_keeps_its_fit():
@@ -37,12 +35,7 @@ def test_paired_scores_are_every_fit_on_the_last_rounds_days(tmp_path):
                                                      "teacher": "heuristic", "workers": 1,
                                                      "batch_size": 64, "dagger_rounds": 1,
                                                      "keep": "paired"}})
-    probe = raw_env(config=load_config("paper"))
-    probe.reset(seed=0)
-    example = GCNController._tensors(probe.observe("evtol_0"))
-    probe.close()
-    actor = GraphActor(example, {"actor": ["port_nodes", "evtol_nodes", "self"]}, "actor", 1,
-                       feature_names("observation"), hidden=16, hidden_dims=[32])
+    actor = small_actor()
     lines: list[str] = []
     stats = warm_start(actor, cfg, env_cfg, log=lines.append, state_path=tmp_path / "state.pt")
     assert any(line.startswith("scoring the 2 fits on the same days") for line in lines)

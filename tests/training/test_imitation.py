@@ -9,12 +9,11 @@ from agents.training.imitation import (
     DayTask, _learner, _with_battery, collect, fit_actor, label_day, label_weights, make_teacher,
     round_tasks,
 )
-from agents.gcn.models import GraphActor
-from agents.controllers.gcn import GCNController
-from agents.gcn.features import feature_names
 from agents.training.config import TrainConfig
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.vertiport_v1 import raw_env
+
+from helpers import small_actor
 
 
 def test_demonstration_day_keeps_choices_with_legal_labels():
@@ -36,12 +35,7 @@ def test_fit_then_learner_drives_a_dagger_day():
     env_cfg = to_dict(load_config("paper"))
     data, _ = collect([DayTask(env_cfg, s, 80, "heuristic", 4) for s in (1, 2)], 1,
                       lambda *_: None, "demo")
-    probe = raw_env(config=load_config("paper"))
-    probe.reset(seed=0)
-    example = GCNController._tensors(probe.observe("evtol_0"))
-    probe.close()
-    actor = GraphActor(example, {"actor": ["port_nodes", "evtol_nodes", "self"]}, "actor", 1,
-                       feature_names("observation"), hidden=16, hidden_dims=[32])
+    actor = small_actor()
     first = fit_actor(actor, data, 1, 64, 1e-3, 0, lambda *_: None, "bc", regret_cap=50.0)
     last = fit_actor(actor, data, 80, 64, 1e-3, 0, lambda *_: None, "bc")
     assert last["cross_entropy"] < first["cross_entropy"] and last["accuracy"] > 0.8
