@@ -408,7 +408,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         started = time.monotonic()
         new, metrics = collect(tasks, backend, log, tag, sizes)
         collected = time.monotonic()
-        if len(drivers) > 1:  # paired: each fit's score on the days every fit drove
+        if last and pre.keep == "paired":  # each fit's score on the days every fit drove
             chunks = [metrics[k * per_driver:(k + 1) * per_driver] for k in range(len(drivers))]
             state["paired_scores"] = [float(np.mean([
                 day_score(m, cfg.lost_vehicle_penalty) for m in chunk

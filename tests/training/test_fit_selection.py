@@ -19,6 +19,7 @@ def test_each_rule_keeps_its_fit():
     assert kept_fit("paired", scores, paired) == 0
     assert kept_fit("last", scores, paired) == 2
     assert kept_fit("round", [float("nan"), 1.0]) == 1  # a fit with no full day is never kept
+    assert kept_fit("paired", [7.0], [7.0]) == 0  # behaviour cloning alone: its one fit
     with pytest.raises(ValueError, match="same days"):
         kept_fit("paired", scores, paired[:2])
     with pytest.raises(ConfigError, match="pretrain.keep"):
@@ -51,3 +52,15 @@ def test_paired_scores_are_every_fit_on_the_last_rounds_days(tmp_path):
     assert stats["chosen_fit"] == kept_fit("paired", scores, paired)
     for key, value in actor.state_dict().items():  # the actor holds the kept fit
         torch.testing.assert_close(value, fits[int(stats["chosen_fit"])]["actor_state_dict"][key])
+
+
+def test_paired_keep_without_dagger_keeps_behaviour_cloning():
+    cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
+                                        "model": {"hidden": 16, "hidden_dims": [32]},
+                                        "pretrain": {"days": 1, "day_steps": 30, "starts": 0,
+                                                     "low_battery_starts": 0, "epochs": 1,
+                                                     "teacher": "heuristic", "workers": 1,
+                                                     "batch_size": 64, "keep": "paired"}})
+    stats = warm_start(small_actor(), cfg, to_dict(load_config("paper")), log=lambda *_: None)
+    assert stats["chosen_fit"] == 0
+    assert stats["fit_0_paired_score"] == pytest.approx(stats["fit_0_score"])
