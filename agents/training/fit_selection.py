@@ -22,6 +22,14 @@ def day_score(metrics: dict[str, Any], lost_vehicle_penalty: float) -> float:
     return float(metrics["total_reward"]) - lost_vehicle_penalty * float(metrics["stranded"])
 
 
+def mean_day_score(metrics: list[dict[str, Any]], day_steps: int,
+                   lost_vehicle_penalty: float) -> float:
+    """The mean :func:`day_score` of the full days (``day_steps`` steps) among ``metrics``;
+    NaN where there is none (such a fit is never kept)."""
+    return float(np.mean([day_score(m, lost_vehicle_penalty) for m in metrics
+                          if m["steps"] == day_steps] or [float("nan")]))
+
+
 def kept_fit(rule: str, scores: list[float], paired: list[float] | None = None) -> int:
     """The index of the fit the warm start keeps under ``rule`` (``pretrain.keep``): the best
     of ``scores`` (each fit's mean on the days it drove in the next round, ``round``), of

@@ -34,7 +34,7 @@ from agents.gcn.features import POLICY_GROUPS
 from agents.gcn.padding import pad_observation, to_padded_action
 from agents.gcn.padding import to_tensordict as padded_tensordict
 from agents.common.seeds import WARM_START_SEED_BASE, training_seed
-from agents.training.fit_selection import day_score, kept_fit
+from agents.training.fit_selection import kept_fit, mean_day_score
 from agents.training.teachers import PLANNER_OPTIONS, make_teacher
 from marl_vertiport.sim.metrics import TRAINING_METRICS
 
@@ -409,19 +409,18 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         new, metrics = collect(tasks, backend, log, tag, sizes)
         collected = time.monotonic()
         if last and pre.keep == "paired":  # each fit's score on the days every fit drove
-            chunks = [metrics[k * per_driver:(k + 1) * per_driver] for k in range(len(drivers))]
-            state["paired_scores"] = [float(np.mean([
-                day_score(m, cfg.lost_vehicle_penalty) for m in chunk
-                if m["steps"] == pre.day_steps] or [float("nan")])) for chunk in chunks]
+            state["paired_scores"] = [
+                mean_day_score(metrics[k * per_driver:(k + 1) * per_driver], pre.day_steps,
+                               cfg.lost_vehicle_penalty) for k in range(len(drivers))]
             log("  fits scored on the same days: " + ", ".join(
                 f"fit {k} {v:.0f}" for k, v in enumerate(state["paired_scores"])))
         metrics = metrics[-per_driver:]  # the last fit's days make the round's record
         full = [m for m in metrics if m["steps"] == pre.day_steps]
-        days = [day_score(m, cfg.lost_vehicle_penalty) for m in full] or [float("nan")]
+        score = mean_day_score(metrics, pre.day_steps, cfg.lost_vehicle_penalty)
         if learner is None:
-            stats["teacher_reward"] = float(np.mean(days))
+            stats["teacher_reward"] = score
         else:
-            scores.append(float(np.mean(days)))
+            scores.append(score)
             log(f"  fit {len(scores) - 1} scores {scores[-1]:.0f} (mean reward of its days, "
                 f"less {cfg.lost_vehicle_penalty:g} per vehicle lost)")
         state["env_steps"] += int(sum(m["steps"] for m in metrics))

@@ -108,7 +108,6 @@ def test_cli_takes_the_reference_agents_the_files_hold(tmp_path, capsys):
     assert "reference agent 'zz'" in capsys.readouterr().err
 
 
-
 def test_the_command_runs_without_a_warning():
     """``python -m agents.evaluate.paired`` imports the package first; were ``paired`` among
     the package's imports, runpy would warn that the module was imported before it ran."""

@@ -13,6 +13,16 @@ from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_
 from helpers import small_actor
 
 
+def _config(**pretrain) -> TrainConfig:
+    """A small model and a warm start of heuristic-driven days with no day starts."""
+    return build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
+                                         "model": {"hidden": 16, "hidden_dims": [32]},
+                                         "pretrain": {"starts": 0, "low_battery_starts": 0,
+                                                      "epochs": 1, "teacher": "heuristic",
+                                                      "workers": 1, "batch_size": 64,
+                                                      "keep": "paired", **pretrain}})
+
+
 def test_each_rule_keeps_its_fit():
     scores, paired = [10.0, 30.0, 20.0], [25.0, 5.0, 15.0]
     assert kept_fit("round", scores, paired) == 1
@@ -29,13 +39,7 @@ def test_each_rule_keeps_its_fit():
 def test_paired_scores_are_every_fit_on_the_last_rounds_days(tmp_path):
     torch.manual_seed(0)
     env_cfg = to_dict(load_config("paper"))
-    cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
-                                        "model": {"hidden": 16, "hidden_dims": [32]},
-                                        "pretrain": {"days": 2, "day_steps": 40, "starts": 0,
-                                                     "low_battery_starts": 0, "epochs": 1,
-                                                     "teacher": "heuristic", "workers": 1,
-                                                     "batch_size": 64, "dagger_rounds": 1,
-                                                     "keep": "paired"}})
+    cfg = _config(days=2, day_steps=40, dagger_rounds=1)
     actor = small_actor()
     lines: list[str] = []
     stats = warm_start(actor, cfg, env_cfg, log=lines.append, state_path=tmp_path / "state.pt")
@@ -55,12 +59,7 @@ def test_paired_scores_are_every_fit_on_the_last_rounds_days(tmp_path):
 
 
 def test_paired_keep_without_dagger_keeps_behaviour_cloning():
-    cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
-                                        "model": {"hidden": 16, "hidden_dims": [32]},
-                                        "pretrain": {"days": 1, "day_steps": 30, "starts": 0,
-                                                     "low_battery_starts": 0, "epochs": 1,
-                                                     "teacher": "heuristic", "workers": 1,
-                                                     "batch_size": 64, "keep": "paired"}})
+    cfg = _config(days=1, day_steps=30)
     stats = warm_start(small_actor(), cfg, to_dict(load_config("paper")), log=lambda *_: None)
     assert stats["chosen_fit"] == 0
     assert stats["fit_0_paired_score"] == pytest.approx(stats["fit_0_score"])
