@@ -19,6 +19,13 @@ A check that loses no vehicle and in which no live vehicle's charge falls below 
 lets the guard skip the checks of the next ``quiet_min`` minutes: most of a day is far from a
 loss, and the checks cost the rollouts.
 
+With a ``fleet`` of its own, the check asks whether the base's choice loses a vehicle when
+``fleet`` decides every turn after it; the base goes on deciding instead, so the check is
+optimistic (a base that keeps a low vehicle hovering passes every check while the rollouts land
+it at its next turn). ``defer_pct`` closes that gap for the vehicles nearest a loss: an acting
+vehicle with less charge than ``defer_pct`` (%) is decided by ``fleet`` itself, then checked as
+usual, so that for those vehicles the rollouts follow the controller that will fly them.
+
 Unlike :class:`agents.controllers.planner.RolloutPlanner`, which replaces the base's choice
 whenever another action earns more reward (and under uncertainty loses more vehicles than the
 dispatcher, docs/training.md), the guard changes a decision only to lose fewer vehicles, so it
@@ -78,6 +85,8 @@ class GuardedController(ScratchRollouts, Controller):
             ``guard[base=gcn,fleet=heuristic]``): the check then asks whether the base's choice,
             followed by ``fleet``'s decisions, loses a vehicle. A model-based base is bound to
             the env's own simulator, ``fleet`` to the scratch copy.
+        defer_pct: with a ``fleet`` of its own, an acting vehicle with less charge than this
+            (%) is decided by ``fleet`` instead of the base (0, default: never).
     """
 
     name = "guard"
@@ -86,7 +95,7 @@ class GuardedController(ScratchRollouts, Controller):
                  samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
                  clairvoyant: bool = False, prefer: str = "reward",
-                 fleet: str | Any | None = None) -> None:
+                 fleet: str | Any | None = None, defer_pct: float = 0.0) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -100,6 +109,11 @@ class GuardedController(ScratchRollouts, Controller):
                              "be nominal (without the config's uncertainties)")
         if prefer not in PREFERRED_COLUMN:
             raise ValueError(f"prefer must be one of {sorted(PREFERRED_COLUMN)}, got {prefer!r}")
+        if not 0.0 <= defer_pct <= 100.0:
+            raise ValueError(f"defer_pct must be a charge in [0, 100] %, got {defer_pct}")
+        if defer_pct > 0 and fleet is None:
+            raise ValueError("defer_pct hands low vehicles to fleet: it needs a fleet of its "
+                             "own (e.g. guard[base=gcn,fleet=heuristic,defer_pct=30])")
         from agents.controllers.registry import make_controller
 
         if isinstance(base, str):
@@ -118,6 +132,7 @@ class GuardedController(ScratchRollouts, Controller):
         self.min_lost = float(min_lost)
         self.clairvoyant = bool(clairvoyant)
         self.prefer = prefer
+        self.defer_pct = float(defer_pct)
         self._episode_seed = 0
         self._runs = self.samples
         self._quiet_until_step = -1
@@ -125,18 +140,22 @@ class GuardedController(ScratchRollouts, Controller):
         #: mean reward, mean least charge %) over its rollouts; empty where the base's choice
         #: stood unchallenged.
         self.last_values: dict[int, tuple[float, float, float]] = {}
-        #: This episode's decisions checked by rollouts, and decisions changed.
+        #: This episode's decisions checked by rollouts, decisions changed, and decisions
+        #: handed to ``fleet`` (``defer_pct``).
         self.checks = 0
         self.changes = 0
+        self.deferrals = 0
         #: Whether the last decision was changed (the base's choice lost a vehicle).
         self.last_changed = False
+        #: Whether ``fleet`` took the last decision instead of the base (``defer_pct``).
+        self.last_deferred = False
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed: int | None = None) -> None:
         self._episode_seed = 0 if seed is None else int(seed)
         self._quiet_until_step = -1
         self.last_values = {}
-        self.checks = self.changes = 0
+        self.checks = self.changes = self.deferrals = 0
         self.last_changed = False
         for policy in self._policies():
             if hasattr(policy, "reset"):
@@ -216,9 +235,11 @@ class GuardedController(ScratchRollouts, Controller):
     @property
     def last_q(self) -> dict[int, float]:
         """For a teacher (:mod:`agents.training.imitation`): the base's values of the
-        candidates of the last decision, where the base's choice stood (empty otherwise or if
-        the base has none)."""
-        return {} if self.last_changed else dict(getattr(self.base, "last_q", {}) or {})
+        candidates of the last decision, where the base took it and its choice stood (empty
+        otherwise or if the base has none)."""
+        if self.last_changed or self.last_deferred:
+            return {}
+        return dict(getattr(self.base, "last_q", {}) or {})
 
     @property
     def last_forced(self) -> bool:
@@ -231,10 +252,15 @@ class GuardedController(ScratchRollouts, Controller):
         if sim is None:
             raise RuntimeError("GuardedController needs the simulator: call bind(env.unwrapped.sim) "
                                "first (the episode runners of agents.controllers.episode do)")
-        choice = int(self.base.act(observation))
+        v = sim.acting
+        self.last_deferred = bool(self.defer_pct > 0 and sim.battery[v] < self.defer_pct)
+        if self.last_deferred:
+            self.deferrals += 1
+            choice = int(self.fleet.act(observation))
+        else:
+            choice = int(self.base.act(observation))
         self.last_values = {}
         self.last_changed = False
-        v = sim.acting
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING) or sim.step_count < self._quiet_until_step:
             return choice
         if not np.array_equal(observation["action_mask"], sim.action_mask(v)):

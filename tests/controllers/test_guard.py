@@ -293,3 +293,52 @@ def test_a_fleet_of_its_own_flies_the_rollouts_and_the_base_decides_on_the_env()
     for g in (guard, plain, shared):
         g.close()
     env.close()
+
+
+def test_defer_pct_hands_the_low_vehicles_to_the_fleet():
+    """Below ``defer_pct`` the fleet decides and the base is not asked; at or above it the base
+    decides; at 100 % every decision is that of the fleet guarded by itself."""
+    with pytest.raises(ValueError, match="defer_pct"):
+        GuardedController(fleet="heuristic", defer_pct=101)
+    with pytest.raises(ValueError, match="fleet"):
+        GuardedController(defer_pct=30)
+    env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 240})
+    sim = env.unwrapped.sim
+    base = _Recorder()
+    guard = GuardedController(base=base, fleet=DispatcherController(), horizon_min=30,
+                              nominal=True, defer_pct=60)
+    env.reset(seed=1)
+    guard.reset(seed=1)
+    guard.bind(sim)
+    asked = {True: 0, False: 0}
+    for agent in env.agent_iter():
+        if env.terminations[agent] or env.truncations[agent]:
+            env.step(None)
+            continue
+        low, calls = bool(sim.battery[sim.acting] < 60), base.calls
+        action = guard.act(env.observe(agent))
+        assert guard.last_deferred == low and base.calls == calls + (not low)
+        asked[low] += 1
+        env.step(action)
+    assert asked[True] > 0 and asked[False] > 0 and guard.deferrals == asked[True]
+    # Deferring every vehicle is the fleet guarded by itself, decision for decision.
+    got = []
+    for g in (GuardedController(base=_KeepsHolding(), fleet=DispatcherController(),
+                                horizon_min=30, nominal=True, defer_pct=100),
+              GuardedController(base=DispatcherController(), horizon_min=30, nominal=True)):
+        actions = []
+        env.reset(seed=0)
+        g.reset(seed=0)
+        g.bind(sim)
+        for agent in env.agent_iter():
+            if env.terminations[agent] or env.truncations[agent]:
+                env.step(None)
+                continue
+            actions.append(g.act(env.observe(agent)))
+            env.step(actions[-1])
+        got.append(actions)
+        g.close()
+    assert got[0] == got[1]
+    assert make_controller("guard[fleet=heuristic,defer_pct=30]").defer_pct == 30
+    guard.close()
+    env.close()
