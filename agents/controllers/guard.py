@@ -25,6 +25,10 @@ optimistic (a base that keeps a low vehicle hovering passes every check while th
 it at its next turn). ``defer_pct`` closes that gap for the vehicles nearest a loss: an acting
 vehicle with less charge than ``defer_pct`` (%) is decided by ``fleet`` itself, then checked as
 usual, so that for those vehicles the rollouts follow the controller that will fly them.
+``margin_pct`` hands ``fleet`` the decisions whose check is not clean: where a rollout of the
+base's choice loses a vehicle or lets a live vehicle's charge fall below ``margin_pct`` (%), the
+fleet's own choice is checked instead, so the base decides only while its choice keeps the whole
+fleet that far from a loss.
 
 Unlike :class:`agents.controllers.planner.RolloutPlanner`, which replaces the base's choice
 whenever another action earns more reward (and under uncertainty loses more vehicles than the
@@ -87,6 +91,9 @@ class GuardedController(ScratchRollouts, Controller):
             the env's own simulator, ``fleet`` to the scratch copy.
         defer_pct: with a ``fleet`` of its own, an acting vehicle with less charge than this
             (%) is decided by ``fleet`` instead of the base (0, default: never).
+        margin_pct: with a ``fleet`` of its own, a checked decision whose base choice loses a
+            vehicle, or lets a live vehicle's charge fall below this (%), in a rollout is
+            decided by ``fleet`` instead, then checked as usual (0, default: never).
     """
 
     name = "guard"
@@ -95,7 +102,8 @@ class GuardedController(ScratchRollouts, Controller):
                  samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
                  clairvoyant: bool = False, prefer: str = "reward",
-                 fleet: str | Any | None = None, defer_pct: float = 0.0) -> None:
+                 fleet: str | Any | None = None, defer_pct: float = 0.0,
+                 margin_pct: float = 0.0) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -109,11 +117,12 @@ class GuardedController(ScratchRollouts, Controller):
                              "be nominal (without the config's uncertainties)")
         if prefer not in PREFERRED_COLUMN:
             raise ValueError(f"prefer must be one of {sorted(PREFERRED_COLUMN)}, got {prefer!r}")
-        if not 0.0 <= defer_pct <= 100.0:
-            raise ValueError(f"defer_pct must be a charge in [0, 100] %, got {defer_pct}")
-        if defer_pct > 0 and fleet is None:
-            raise ValueError("defer_pct hands low vehicles to fleet: it needs a fleet of its "
-                             "own (e.g. guard[base=gcn,fleet=heuristic,defer_pct=30])")
+        for name, pct in (("defer_pct", defer_pct), ("margin_pct", margin_pct)):
+            if not 0.0 <= pct <= 100.0:
+                raise ValueError(f"{name} must be a charge in [0, 100] %, got {pct}")
+            if pct > 0 and fleet is None:
+                raise ValueError(f"{name} hands decisions to fleet: it needs a fleet of its "
+                                 f"own (e.g. guard[base=gcn,fleet=heuristic,{name}=30])")
         from agents.controllers.registry import make_controller
 
         if isinstance(base, str):
@@ -133,6 +142,7 @@ class GuardedController(ScratchRollouts, Controller):
         self.clairvoyant = bool(clairvoyant)
         self.prefer = prefer
         self.defer_pct = float(defer_pct)
+        self.margin_pct = float(margin_pct)
         self._episode_seed = 0
         self._runs = self.samples
         self._quiet_until_step = -1
@@ -141,13 +151,14 @@ class GuardedController(ScratchRollouts, Controller):
         #: stood unchallenged.
         self.last_values: dict[int, tuple[float, float, float]] = {}
         #: This episode's decisions checked by rollouts, decisions changed, and decisions
-        #: handed to ``fleet`` (``defer_pct``).
+        #: handed to ``fleet`` (``defer_pct``, ``margin_pct``).
         self.checks = 0
         self.changes = 0
         self.deferrals = 0
         #: Whether the last decision was changed (the base's choice lost a vehicle).
         self.last_changed = False
-        #: Whether ``fleet`` took the last decision instead of the base (``defer_pct``).
+        #: Whether ``fleet`` took the last decision instead of the base (``defer_pct``,
+        #: ``margin_pct``).
         self.last_deferred = False
 
     # ------------------------------------------------------------------ episode
@@ -271,8 +282,17 @@ class GuardedController(ScratchRollouts, Controller):
             return choice
         self.checks += 1
         first, least = self.evaluate(sim, [choice], stop_at_loss=True)
+        if self.margin_pct > 0 and not self.last_deferred and (
+                first[choice][0] > 0 or least < self.margin_pct):
+            # Not clean for margin_pct: the fleet decides, checked as usual.
+            self.last_deferred = True
+            self.deferrals += 1
+            own = int(self.fleet.act(observation))
+            if own != choice:
+                choice = own
+                first, least = self.evaluate(sim, [choice], stop_at_loss=True)
         if first[choice][0] == 0:
-            if least >= self.quiet_pct:
+            if least >= max(self.quiet_pct, self.margin_pct):
                 self._quiet_until_step = sim.step_count + int(
                     round(self.quiet_min / sim.cfg.schedule.minutes_per_step))
             return choice

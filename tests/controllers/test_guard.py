@@ -342,3 +342,51 @@ def test_defer_pct_hands_the_low_vehicles_to_the_fleet():
     assert make_controller("guard[fleet=heuristic,defer_pct=30]").defer_pct == 30
     guard.close()
     env.close()
+
+
+class _Fixed:
+    """A controller that always takes ``action``."""
+
+    def __init__(self, action: int) -> None:
+        self.action = action
+
+    def act(self, observation: dict) -> int:
+        return self.action
+
+
+@pytest.mark.parametrize("margin_pct, base_stands", [(5.0, True), (25.0, False)])
+def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands):
+    """A base choice whose rollouts keep every vehicle at 10 % stands under a 5 % margin; under
+    25 % the fleet's own choice is checked and taken."""
+    env = vertiport_v1.env(config="paper")
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    fleet = DispatcherController()
+    fleet.bind(sim)
+    while True:  # the dispatcher's day up to a decision with two legal actions or more
+        obs = env.observe(env.agent_selection)
+        legal = np.flatnonzero(obs["action_mask"]).tolist()
+        if len(legal) >= 2 and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING):
+            break
+        env.step(fleet.act(obs))
+    own = fleet.act(obs)
+    other = next(a for a in legal if a != own)
+    guard = GuardedController(base=_Fixed(other), fleet=fleet, nominal=True,
+                              margin_pct=margin_pct)
+    guard.reset(seed=0)
+    guard.bind(sim)
+    least = {other: 10.0, own: 40.0}
+    checked = []
+
+    def crafted(sim, actions, stop_at_loss=False):
+        checked.extend(actions)
+        return {a: (0.0, 0.0, least[a]) for a in actions}, min(least[a] for a in actions)
+
+    guard.evaluate = crafted
+    assert guard.act(obs) == (other if base_stands else own)
+    assert guard.last_deferred is (not base_stands) and guard.deferrals == (not base_stands)
+    assert checked == ([other] if base_stands else [other, own])
+    with pytest.raises(ValueError, match="margin_pct"):
+        GuardedController(margin_pct=10)
+    guard.close()
+    env.close()
