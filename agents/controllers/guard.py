@@ -28,7 +28,9 @@ usual, so that for those vehicles the rollouts follow the controller that will f
 ``margin_pct`` hands ``fleet`` the decisions whose check is not clean: where a rollout of the
 base's choice loses a vehicle or lets a live vehicle's charge fall below ``margin_pct`` (%), the
 fleet's own choice is checked instead, so the base decides only while its choice keeps the whole
-fleet that far from a loss.
+fleet that far from a loss (and a check is quiet only if it keeps ``margin_pct`` too). Around a
+base other than ``fleet``, a quiet check hands the base the next ``quiet_min`` minutes unchecked;
+``quiet_pct`` above 100 checks every decision that matters.
 
 Unlike :class:`agents.controllers.planner.RolloutPlanner`, which replaces the base's choice
 whenever another action earns more reward (and under uncertainty loses more vehicles than the
@@ -167,7 +169,7 @@ class GuardedController(ScratchRollouts, Controller):
         self._quiet_until_step = -1
         self.last_values = {}
         self.checks = self.changes = self.deferrals = 0
-        self.last_changed = False
+        self.last_changed = self.last_deferred = False
         for policy in self._policies():
             if hasattr(policy, "reset"):
                 policy.reset(seed=seed)

@@ -386,6 +386,12 @@ def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands)
     assert guard.act(obs) == (other if base_stands else own)
     assert guard.last_deferred is (not base_stands) and guard.deferrals == (not base_stands)
     assert checked == ([other] if base_stands else [other, own])
+    # Quiet minutes only after a check that keeps every vehicle at quiet_pct (20) and margin_pct.
+    assert (guard._quiet_until_step > 0) is (not base_stands)
+    if not base_stands:  # the fleet's choice keeps 22 %: clean, but not quiet under a 25 % margin
+        least[own] = 22.0
+        guard.reset(seed=0)
+        assert guard.act(obs) == own and guard._quiet_until_step == -1
     with pytest.raises(ValueError, match="margin_pct"):
         GuardedController(margin_pct=10)
     guard.close()
