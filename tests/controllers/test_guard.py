@@ -28,6 +28,37 @@ class _KeepsHolding(DispatcherController):
         return super().act(observation)
 
 
+def _guarded_actions(env, guard, seed: int) -> list[int]:
+    """The actions ``guard`` takes on day ``seed`` of ``env``, bound to its simulator."""
+    actions = []
+    env.reset(seed=seed)
+    guard.reset(seed=seed)
+    guard.bind(env.unwrapped.sim)
+    for agent in env.agent_iter():
+        if env.terminations[agent] or env.truncations[agent]:
+            env.step(None)
+            continue
+        actions.append(guard.act(env.observe(agent)))
+        env.step(actions[-1])
+    return actions
+
+
+def _dispatcher_day_to_a_choice(env, min_legal: int):
+    """Day 0 of ``env`` flown by the dispatcher up to a decision of a vehicle on a port, on a
+    charger or hovering with at least ``min_legal`` legal actions: (the dispatcher, bound to
+    the simulator; that decision's observation; its legal actions)."""
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    dispatcher = DispatcherController()
+    dispatcher.bind(sim)
+    while True:
+        obs = env.observe(env.agent_selection)
+        legal = np.flatnonzero(obs["action_mask"]).tolist()
+        if len(legal) >= min_legal and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING):
+            return dispatcher, obs, legal
+        env.step(dispatcher.act(obs))
+
+
 def test_guard_keeps_the_vehicles_its_base_loses():
     env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 240})
     lost = {"base": 0, "guard": 0}
@@ -199,16 +230,8 @@ def test_of_the_actions_that_lose_fewest_the_guard_takes_the_preferred(prefer, w
     """Where the base's choice loses a vehicle and two others lose none, ``prefer`` picks the
     one that earns more reward or the one that keeps more charge."""
     env = vertiport_v1.env(config="paper")
-    env.reset(seed=0)
     sim = env.unwrapped.sim
-    base = DispatcherController()
-    base.bind(sim)
-    while True:  # the dispatcher's day up to a decision with three legal actions or more
-        obs = env.observe(env.agent_selection)
-        legal = np.flatnonzero(obs["action_mask"]).tolist()
-        if len(legal) >= 3 and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING):
-            break
-        env.step(base.act(obs))
+    _, obs, legal = _dispatcher_day_to_a_choice(env, 3)
     guard = GuardedController(nominal=True, prefer=prefer)
     guard.reset(seed=0)
     guard.bind(sim)
@@ -259,17 +282,7 @@ def test_a_fleet_of_its_own_flies_the_rollouts_and_the_base_decides_on_the_env()
     for seed in range(2):
         got = {}
         for name, g in (("plain", plain), ("shared", shared)):
-            actions = []
-            env.reset(seed=seed)
-            g.reset(seed=seed)
-            g.bind(env.unwrapped.sim)
-            for agent in env.agent_iter():
-                if env.terminations[agent] or env.truncations[agent]:
-                    env.step(None)
-                    continue
-                actions.append(g.act(env.observe(agent)))
-                env.step(actions[-1])
-            got[name] = (actions, g.changes)
+            got[name] = (_guarded_actions(env, g, seed), g.changes)
         assert got["plain"] == got["shared"] and got["plain"][1] > 0
     # The base decides once a turn; the rollouts are the fleet's.
     env.reset(seed=0)
@@ -326,17 +339,7 @@ def test_defer_pct_hands_the_low_vehicles_to_the_fleet():
     for g in (GuardedController(base=_KeepsHolding(), fleet=DispatcherController(),
                                 horizon_min=30, nominal=True, defer_pct=100),
               GuardedController(base=DispatcherController(), horizon_min=30, nominal=True)):
-        actions = []
-        env.reset(seed=0)
-        g.reset(seed=0)
-        g.bind(sim)
-        for agent in env.agent_iter():
-            if env.terminations[agent] or env.truncations[agent]:
-                env.step(None)
-                continue
-            actions.append(g.act(env.observe(agent)))
-            env.step(actions[-1])
-        got.append(actions)
+        got.append(_guarded_actions(env, g, seed=0))
         g.close()
     assert got[0] == got[1]
     assert make_controller("guard[fleet=heuristic,defer_pct=30]").defer_pct == 30
@@ -359,16 +362,8 @@ def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands)
     """A base choice whose rollouts keep every vehicle at 10 % stands under a 5 % margin; under
     25 % the fleet's own choice is checked and taken."""
     env = vertiport_v1.env(config="paper")
-    env.reset(seed=0)
     sim = env.unwrapped.sim
-    fleet = DispatcherController()
-    fleet.bind(sim)
-    while True:  # the dispatcher's day up to a decision with two legal actions or more
-        obs = env.observe(env.agent_selection)
-        legal = np.flatnonzero(obs["action_mask"]).tolist()
-        if len(legal) >= 2 and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING):
-            break
-        env.step(fleet.act(obs))
+    fleet, obs, legal = _dispatcher_day_to_a_choice(env, 2)
     own = fleet.act(obs)
     other = next(a for a in legal if a != own)
     guard = GuardedController(base=_Fixed(other), fleet=fleet, nominal=True,
