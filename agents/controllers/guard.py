@@ -260,16 +260,21 @@ class GuardedController(ScratchRollouts, Controller):
         base's choice, which lost a vehicle (or the base itself ruled one out)."""
         return self.last_changed or bool(getattr(self.base, "last_forced", False))
 
+    def _fleet_decides(self, observation: dict) -> int:
+        """``fleet``'s choice for the acting vehicle, counted as a decision handed over."""
+        self.last_deferred = True
+        self.deferrals += 1
+        return int(self.fleet.act(observation))
+
     def act(self, observation: dict) -> int:
         sim = self.sim
         if sim is None:
             raise RuntimeError("GuardedController needs the simulator: call bind(env.unwrapped.sim) "
                                "first (the episode runners of agents.controllers.episode do)")
         v = sim.acting
-        self.last_deferred = bool(self.defer_pct > 0 and sim.battery[v] < self.defer_pct)
-        if self.last_deferred:
-            self.deferrals += 1
-            choice = int(self.fleet.act(observation))
+        self.last_deferred = False
+        if self.defer_pct > 0 and sim.battery[v] < self.defer_pct:
+            choice = self._fleet_decides(observation)
         else:
             choice = int(self.base.act(observation))
         self.last_values = {}
@@ -286,10 +291,7 @@ class GuardedController(ScratchRollouts, Controller):
         first, least = self.evaluate(sim, [choice], stop_at_loss=True)
         if self.margin_pct > 0 and not self.last_deferred and (
                 first[choice][0] > 0 or least < self.margin_pct):
-            # Not clean for margin_pct: the fleet decides, checked as usual.
-            self.last_deferred = True
-            self.deferrals += 1
-            own = int(self.fleet.act(observation))
+            own = self._fleet_decides(observation)  # not clean for margin_pct; checked as usual
             if own != choice:
                 choice = own
                 first, least = self.evaluate(sim, [choice], stop_at_loss=True)
