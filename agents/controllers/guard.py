@@ -32,6 +32,13 @@ fleet that far from a loss (and a check is quiet only if it keeps ``margin_pct``
 base other than ``fleet``, a quiet check hands the base the next ``quiet_min`` minutes unchecked;
 ``quiet_pct`` above 100 checks every decision that matters.
 
+``self_check`` closes the rest of the gap: a base choice that passes the fleet's rollouts is
+rolled out ``samples`` more times with the base itself going on deciding (``fleet`` for the
+vehicles below ``defer_pct``), as it will once the choice is taken, and it stands only if none of
+those rollouts loses a vehicle either; otherwise ``fleet`` decides, checked as usual. The base
+must decide from observations (not a look-ahead that reads the simulator); a GCN checkpoint is
+rolled out through its stateless greedy copy (``fast()``).
+
 Unlike :class:`agents.controllers.planner.RolloutPlanner`, which replaces the base's choice
 whenever another action earns more reward (and under uncertainty loses more vehicles than the
 dispatcher, docs/training.md), the guard changes a decision only to lose fewer vehicles, so it
@@ -96,6 +103,10 @@ class GuardedController(ScratchRollouts, Controller):
         margin_pct: with a ``fleet`` of its own, a checked decision whose base choice loses a
             vehicle, or lets a live vehicle's charge fall below this (%), in a rollout is
             decided by ``fleet`` instead, then checked as usual (0, default: never).
+        self_check: with a ``fleet`` of its own, a base choice that passes the fleet's rollouts
+            stands only if ``samples`` rollouts in which the base goes on deciding (``fleet``
+            below ``defer_pct``) lose no vehicle either; otherwise ``fleet`` decides, checked
+            as usual (default: off).
     """
 
     name = "guard"
@@ -105,7 +116,7 @@ class GuardedController(ScratchRollouts, Controller):
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
                  clairvoyant: bool = False, prefer: str = "reward",
                  fleet: str | Any | None = None, defer_pct: float = 0.0,
-                 margin_pct: float = 0.0) -> None:
+                 margin_pct: float = 0.0, self_check: bool = False) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -125,12 +136,18 @@ class GuardedController(ScratchRollouts, Controller):
             if pct > 0 and fleet is None:
                 raise ValueError(f"{name} hands decisions to fleet: it needs a fleet of its "
                                  f"own (e.g. guard[base=gcn,fleet=heuristic,{name}=30])")
+        if self_check and fleet is None:
+            raise ValueError("self_check rolls the base out beside fleet: it needs a fleet of "
+                             "its own (e.g. guard[base=gcn,fleet=heuristic,self_check=true])")
         from agents.controllers.registry import make_controller
 
         if isinstance(base, str):
             base = make_controller(base)
         if isinstance(fleet, str):
             fleet = make_controller(fleet)
+        if self_check and isinstance(base, ScratchRollouts):
+            raise ValueError(f"self_check rolls the base out in a scratch copy: a look-ahead "
+                             f"that reads the env's simulator ({type(base).__name__}) cannot be")
         self.base = base
         #: The rollouts' controller (``fleet``); ``None``: the base.
         self.fleet = fleet
@@ -145,6 +162,10 @@ class GuardedController(ScratchRollouts, Controller):
         self.prefer = prefer
         self.defer_pct = float(defer_pct)
         self.margin_pct = float(margin_pct)
+        #: The continuation of the self-check (``self_check``): the base (its fast copy where it
+        #: has one) deciding, ``fleet`` below ``defer_pct``; ``None`` without the check.
+        self.onward = (_Onward(getattr(base, "fast", lambda: base)(), fleet, self.defer_pct)
+                       if self_check else None)
         self._episode_seed = 0
         self._runs = self.samples
         self._quiet_until_step = -1
@@ -189,6 +210,8 @@ class GuardedController(ScratchRollouts, Controller):
         super().bind(sim)
         if self.fleet is not None and hasattr(self.base, "bind"):
             self.base.bind(sim)
+        if self.onward is not None:
+            self.onward.sim = self._scratch
         cfg = self._scratch.cfg
         # Without uncertainties every rollout of an action is the same: one is enough.
         self._runs = 1 if self.clairvoyant or cfg == nominal_config(cfg) else self.samples
@@ -205,13 +228,14 @@ class GuardedController(ScratchRollouts, Controller):
         return max(1, int(round(self.horizon_min / sim.cfg.schedule.minutes_per_step)))
 
     def evaluate(self, sim: VertiportSim, actions: list[int],
-                 stop_at_loss: bool = False
+                 stop_at_loss: bool = False, policy: Any = None
                  ) -> tuple[dict[int, tuple[float, float, float]], float]:
         """Per action, the mean over its rollouts of the vehicles lost (beyond those already
         lost), of the reward and of the least charge (%) of a live vehicle in the rollout; and
         the least charge (%) of a live vehicle seen in any rollout step. ``stop_at_loss``: stop
         an action's rollouts at the first that loses a vehicle (its means are then over the
-        rollouts run)."""
+        rollouts run). ``policy`` flies the rollouts (default: :attr:`rollout_policy`)."""
+        policy = self.rollout_policy if policy is None else policy
         scratch, builder = self._scratch, self._builder
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
@@ -233,8 +257,7 @@ class GuardedController(ScratchRollouts, Controller):
                 rng = None if self.clairvoyant else np.random.default_rng(
                     (self.seed, self._episode_seed, sim.step_count, k))
                 run_least[0] = 100.0
-                reward += roll_out(scratch, builder, self.rollout_policy, snap, a, steps, rng,
-                                   watch)
+                reward += roll_out(scratch, builder, policy, snap, a, steps, rng, watch)
                 lost += int(np.count_nonzero(scratch.lost)) - lost_before
                 margin += run_least[0]
                 least = min(least, run_least[0])
@@ -295,6 +318,13 @@ class GuardedController(ScratchRollouts, Controller):
             if own != choice:
                 choice = own
                 first, least = self.evaluate(sim, [choice], stop_at_loss=True)
+        if first[choice][0] == 0 and self.onward is not None and not self.last_deferred:
+            onward, _ = self.evaluate(sim, [choice], stop_at_loss=True, policy=self.onward)
+            if onward[choice][0] > 0:  # the base, going on deciding, loses one: fleet decides
+                own = self._fleet_decides(observation)
+                if own != choice:
+                    choice = own
+                    first, least = self.evaluate(sim, [choice], stop_at_loss=True)
         if first[choice][0] == 0:
             if least >= max(self.quiet_pct, self.margin_pct):
                 self._quiet_until_step = sim.step_count + int(
@@ -310,3 +340,20 @@ class GuardedController(ScratchRollouts, Controller):
         self.changes += 1
         self.last_changed = True
         return int(best)
+
+
+class _Onward:
+    """The self-check's continuation: ``policy`` decides for every vehicle but those with less
+    charge than ``defer_pct`` (%), which ``fleet`` decides, as the guard will after the checked
+    turn (short of its own checks). ``sim`` is the scratch copy the rollouts run in."""
+
+    def __init__(self, policy: Any, fleet: Any, defer_pct: float) -> None:
+        self.policy, self.fleet, self.defer_pct = policy, fleet, defer_pct
+        self.pure_act = bool(getattr(policy, "pure_act", False) and getattr(fleet, "pure_act", False))
+        self.sim: VertiportSim | None = None
+
+    def act(self, observation: dict) -> int:
+        sim = self.sim
+        if self.defer_pct > 0 and sim.battery[sim.acting] < self.defer_pct:
+            return int(self.fleet.act(observation))
+        return int(self.policy.act(observation))

@@ -12,6 +12,7 @@ from agents.controllers.registry import make_controller
 from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
+from marl_vertiport.spaces import ObservationBuilder
 
 
 class _KeepsHolding(DispatcherController):
@@ -391,3 +392,75 @@ def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands)
         GuardedController(margin_pct=10)
     guard.close()
     env.close()
+
+
+def test_self_check_hands_a_choice_the_base_itself_would_lose_to_the_fleet():
+    """A base choice that passes the fleet's rollouts stands only if the rollouts in which the
+    base goes on deciding lose nothing either; otherwise the fleet's choice is checked and
+    taken."""
+    env = vertiport_v1.env(config="paper")
+    sim = env.unwrapped.sim
+    fleet, obs, legal = _dispatcher_day_to_a_choice(env, 2)
+    own = fleet.act(obs)
+    other = next(a for a in legal if a != own)
+    for onward_loses in (False, True):
+        guard = GuardedController(base=_Fixed(other), fleet=fleet, nominal=True,
+                                  self_check=True)
+        guard.reset(seed=0)
+        guard.bind(sim)
+        checked = []
+
+        def crafted(sim, actions, stop_at_loss=False, policy=None):
+            onward = policy is guard.onward
+            checked.append((actions[0], onward))
+            lost = 1.0 if onward and onward_loses else 0.0
+            return {a: (lost, 0.0, 50.0) for a in actions}, 50.0
+
+        guard.evaluate = crafted
+        assert guard.act(obs) == (own if onward_loses else other)
+        assert guard.last_deferred is onward_loses and guard.deferrals == onward_loses
+        assert checked == ([(other, False), (other, True), (own, False)] if onward_loses
+                           else [(other, False), (other, True)])
+        guard.close()
+    with pytest.raises(ValueError, match="fleet"):
+        GuardedController(self_check=True)
+    with pytest.raises(ValueError, match="scratch copy"):
+        GuardedController(base="rollout", fleet="heuristic", self_check=True)
+    env.close()
+
+
+def test_the_self_checks_continuation_is_the_base_above_defer_pct_and_the_fleet_below():
+    env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 120})
+    base, fleet = _Fixed(0), DispatcherController()
+    guard = GuardedController(base=base, fleet=fleet, nominal=True, defer_pct=50,
+                              self_check=True)
+    env.reset(seed=0)
+    guard.bind(env.unwrapped.sim)
+    onward, scratch = guard.onward, guard._scratch
+    assert onward.sim is scratch and onward.policy is base and not onward.pure_act
+    scratch.restore(env.unwrapped.sim.snapshot())
+    obs = ObservationBuilder(scratch).observe(scratch.acting)
+    v = scratch.acting
+    for pct, wanted in ((80.0, 0), (20.0, fleet.act(obs))):
+        scratch.battery[v] = pct
+        assert onward.act(obs) == wanted
+    guard.close()
+    env.close()
+
+
+def test_self_check_keeps_the_vehicles_a_holding_base_loses():
+    """A base that keeps its vehicles hovering passes the dispatcher's rollouts (the dispatcher
+    lands them at their next turn); its own rollouts lose them, and the fleet decides."""
+    env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 240})
+    lost, deferrals = {}, {}
+    for self_check in (False, True):
+        lost[self_check] = deferrals[self_check] = 0
+        for seed in range(2):
+            guard = GuardedController(base=_KeepsHolding(), fleet=DispatcherController(),
+                                      horizon_min=30, nominal=True, self_check=self_check)
+            lost[self_check] += run_episode(env, guard, seed=seed)["stranded"]
+            deferrals[self_check] += guard.deferrals
+            guard.close()
+    env.close()
+    assert deferrals[False] == 0 and deferrals[True] > 0
+    assert lost[True] < lost[False]
