@@ -51,10 +51,23 @@ def split_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return match["target"].strip(), kwargs
 
 
+#: Built-in controllers that play the checkpoint their ``base`` names, and their default base
+#: (``None``: a rule, which plays none).
+CHECKPOINT_BASES = {"handback": "gcn", "guard": None}
+
+
 def checkpoint_files(spec: str) -> list[Path]:
-    """The checkpoint files an agent spec plays (``gcn``, a ``.pt`` path, or checkpoints joined
-    by ``+``); none for any other agent."""
-    parts = spec.split("+") if "+" in spec else [split_spec(spec)[0]]
+    """The checkpoint files an agent spec plays (``gcn``, a ``.pt`` path, checkpoints joined
+    by ``+``, or a look-ahead around one: ``handback``, ``guard[base=...]``); none for any
+    other agent."""
+    try:
+        target, kwargs = split_spec(spec)
+    except AgentSpecError:
+        target, kwargs = spec, {}
+    if target in CHECKPOINT_BASES:
+        base = kwargs.get("base", CHECKPOINT_BASES[target])
+        return checkpoint_files(base) if isinstance(base, str) else []
+    parts = spec.split("+") if "+" in spec else [target]
     files = []
     for part in parts:
         if part == "gcn":

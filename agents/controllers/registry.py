@@ -1,7 +1,8 @@
 """Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``,
 ``rollout`` (the look-ahead planner, which reads the simulator), ``guard`` (a controller,
 the dispatcher by default, with a look-ahead guard against lost vehicles), ``gcn``
-(the shipped trained policy), ``package.module:Class`` or ``path/to/file.py:Class`` (a class,
+(the shipped trained policy), ``handback`` (the shipped policy handed back to the dispatcher
+near a loss: the guard around ``gcn``), ``package.module:Class`` or ``path/to/file.py:Class`` (a class,
 or a ready object; modules and files resolve from the working directory, as under
 ``python -m``), the path
 of a training checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
@@ -29,13 +30,15 @@ BUILTIN = {
     "heuristic": "agents.controllers.dispatcher:DispatcherController",
     "rollout": "agents.controllers.planner:RolloutPlanner",
     "guard": "agents.controllers.guard:GuardedController",
+    "handback": "agents.controllers.handback:HandbackController",
 }
 
 
 def agent_help() -> str:
     """What an agent spec may be, for the ``--help`` of every command that takes one."""
     names = ", ".join([*BUILTIN, "gcn"])
-    return (f"a built-in name ({names}; gcn is the shipped checkpoint), the path of a training "
+    return (f"a built-in name ({names}; gcn is the shipped checkpoint, handback the same "
+            "handed back to the dispatcher near a loss), the path of a training "
             "checkpoint (.pt), checkpoints joined by '+' (their ensemble), an import path "
             "'package.module:Class' or a file 'path/to/file.py:Class' (both from the working "
             "directory); constructor arguments "
