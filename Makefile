@@ -91,8 +91,8 @@ endif
 sweep: $(STAMP)  ## run the sweep SWEEP of configs/sweeps/ (default wind) into runs/sweeps/SWEEP: tidy CSV, figure with CIs (BACKEND=ray to use a cluster)
 	$(CLI) sweep $(SWEEP) --out runs/sweeps/$(notdir $(basename $(SWEEP))) $(RUN_ON)
 
-results: $(STAMP)  ## regenerate every shipped result of the shipped policy: docs/results.md (50 days per uncertainty level, the planner included), docs/results/transfer.md and docs/results/scaling.md (the suites), docs/results/sweeps/wind (the wind sweep)
-	$(CLI) evaluate --agents random fcfs heuristic rollout gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 50 --out docs/results --report docs/results.md $(RUN_ON)
+results: $(STAMP)  ## regenerate every shipped result of the shipped policy: docs/results.md (200 test days per uncertainty level: the baselines, the planner, the guard, gcn and handback; about 4.5 hours on 2 cores), docs/results/transfer.md and docs/results/scaling.md (the suites), docs/results/sweeps/wind (the wind sweep)
+	$(CLI) evaluate --agents random fcfs heuristic guard rollout gcn handback --configs paper paper_uncertain paper_uncertain_10 --episodes 200 --out docs/results --report docs/results.md $(RUN_ON)
 	$(CLI) evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md $(RUN_ON)
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)

@@ -14,9 +14,10 @@ does), plays the new checkpoint and the shipped one on the same 200 validation d
     make check-train-margin                                      # train seeds 0-2, measure M
 
 **Equivalent** means: the 95 % bootstrap interval of the mean daily reward difference lies
-within ±M, and the vehicles lost a day (in the air and on the ground) differ by at most 0.1.
-M is the spread of the mean daily reward between training seeds of the same pipeline on the
-same days, measured on one machine and written in ``configs/checks/train.yaml``: a run on
+within ±M, and the vehicles lost a day (in the air and on the ground) differ by at most the
+config's ``lost_margin``. M and ``lost_margin`` are the spreads of the mean daily reward and of
+the vehicles lost a day between training seeds of the same pipeline on the same days, measured
+on one machine and written in ``configs/checks/train.yaml``: a run on
 another machine is, in effect, another seed, and a policy within the spread of the seeds is as
 good as the docs' policy can be told to be. The command prints M, a table of every safety
 metric beside the reward, and the verdict; ``check.json`` and the evaluation's files go to
@@ -212,7 +213,8 @@ def verdict(stats: dict[str, dict[str, float]], reward_margin: float,
 
 def spread(evaluation, agents: Sequence[str]) -> dict[str, Any]:
     """M from several training seeds' checkpoints played on the same days: the largest
-    difference of their mean daily rewards, with each one's mean reward and vehicles lost."""
+    difference of their mean daily rewards (and ``lost_margin``, that of their vehicles lost a
+    day), with each one's mean reward and vehicles lost."""
     means = {}
     for agent in agents:
         days = _by_day(evaluation, agent)
@@ -220,7 +222,9 @@ def spread(evaluation, agents: Sequence[str]) -> dict[str, Any]:
                         "lost": float(np.mean([m["stranded"] for m in days.values()])),
                         "days": len(days)}
     rewards = [m["reward"] for m in means.values()]
-    return {"margin": max(rewards) - min(rewards), "runs": means}
+    lost = [m["lost"] for m in means.values()]
+    return {"margin": max(rewards) - min(rewards), "lost_margin": max(lost) - min(lost),
+            "runs": means}
 
 
 # ------------------------------------------------------------------------------ output
@@ -325,7 +329,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         print(f"\n{_days_text(cfg, evaluation)}")
         for agent, m in result["runs"].items():
             print(f"  {agent}: reward {m['reward']:.1f} a day, vehicles lost {m['lost']:.2f} a day")
-        print(f"M = {result['margin']:.1f} (the largest difference of the mean daily rewards)"
+        print(f"M = {result['margin']:.1f} (the largest difference of the mean daily rewards), "
+              f"lost_margin = {result['lost_margin']:.3f} (of the vehicles lost a day)"
               + ("; a quick look, not the check's days" if quick else ""))
         return 0
 

@@ -1,5 +1,6 @@
 """What a run's checkpoints carry and where they are: the metadata every checkpoint holds (the
-configs, the feature schema its weights depend on), and the newest complete one of a run."""
+configs, the feature schema its weights depend on), the newest complete one of a run, and the
+slim copy of one that ships (``agents/checkpoints/gcn_default.pt``)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from agents.common.files import write_torch_atomic
 from agents.gcn.features import feature_names
 from agents.training.config import TrainConfig, scenario_configs
 from marl_vertiport.config import to_dict
@@ -33,3 +35,21 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
         if m:
             found.append((int(m.group(1)), path))
     return max(found)[1] if found else None
+
+
+#: What a shipped checkpoint keeps of a run's: the weights, the iteration and the metadata.
+SHIPPED_KEYS = ("actor_state_dict", "critic_state_dict", "iter", "infos")
+
+
+def slim_checkpoint(source: Path, target: Path) -> None:
+    """Write ``source`` (a run's ``model_<it>.pt``) to ``target`` without what only resuming a
+    run needs (the optimizer's state): the file that ships, with the same weights and metadata.
+    ``python -c "from agents.training.checkpoints import slim_checkpoint as s;
+    s('runs/train/<run>/model_59.pt', 'agents/checkpoints/gcn_default.pt')"``."""
+    import torch
+
+    data = torch.load(Path(source), map_location="cpu", weights_only=True)
+    missing = [k for k in SHIPPED_KEYS if k not in data]
+    if missing:
+        raise ValueError(f"{source}: not a training checkpoint (no {', '.join(missing)})")
+    write_torch_atomic(Path(target), {k: data[k] for k in SHIPPED_KEYS})

@@ -64,7 +64,16 @@ def test_margin_is_the_spread_of_the_seeds_mean_rewards(tmp_path, capsys):
                        "--out", str(tmp_path / "m"), *QUICK]) == 0
     assert "M = 0.0" in capsys.readouterr().out
     report = json.loads((tmp_path / "m" / "check.json").read_text())
-    assert report["margin"] == 0.0 and len(report["runs"]) == 2
+    assert report["margin"] == 0.0 and report["lost_margin"] == 0.0 and len(report["runs"]) == 2
+
+
+def test_the_margins_are_the_largest_differences_of_the_seeds_means(monkeypatch):
+    days = {"a": [(10.0, 0.5), (14.0, 0.5)], "b": [(4.0, 1.0), (6.0, 0.5)], "c": [(8.0, 0.0)] * 2}
+    monkeypatch.setattr(check, "_by_day", lambda _evaluation, agent: {
+        k: {"total_reward": r, "stranded": lost} for k, (r, lost) in enumerate(days[agent])})
+    measured = check.spread(None, ["a", "b", "c"])
+    assert measured["margin"] == 12.0 - 5.0 and measured["lost_margin"] == 0.75
+    assert measured["runs"]["b"] == {"reward": 5.0, "lost": 0.75, "days": 2}
 
 
 @pytest.mark.parametrize("text, message", [
@@ -91,4 +100,4 @@ def test_the_shipped_check_config_names_real_configs_and_validation_days():
     assert set(cfg.configs) == set(load_train_config(cfg.train_config).scenarios)
     for name in cfg.configs:
         load_config(name)
-    assert cfg.reward_margin > 0 and cfg.lost_margin == 0.1
+    assert cfg.reward_margin > 0 and 0 < cfg.lost_margin <= 0.5

@@ -100,3 +100,23 @@ def test_a_file_carrying_code_is_refused_by_every_loader_and_never_run(tmp_path,
     with pytest.raises(ValueError, match="not a readable warm-start state.*tensors and plain data only"):
         load_warm_start_state(run / "warmstart_state.pt")
     assert not marker.exists()
+
+
+def test_the_slim_copy_keeps_the_weights_and_metadata_and_drops_the_optimizer(tmp_path):
+    from agents.training.checkpoints import SHIPPED_KEYS, slim_checkpoint
+
+    final = train(tiny_config("multi_agent", iterations=1), tmp_path / "run", log=lambda *_: None,
+                  evaluate=False)
+    slim_checkpoint(final, tmp_path / "ship.pt")
+    full = torch.load(final, weights_only=True)
+    slim = torch.load(tmp_path / "ship.pt", weights_only=True)
+    assert "optimizer_state_dict" in full and tuple(slim) == SHIPPED_KEYS
+    for group in ("actor_state_dict", "critic_state_dict"):
+        assert slim[group].keys() == full[group].keys()
+        assert all(torch.equal(slim[group][k], full[group][k]) for k in full[group])
+    assert slim["infos"] == full["infos"] and slim["iter"] == full["iter"]
+    GCNController(tmp_path / "ship.pt")
+    torch.save({"actor_state_dict": {}}, tmp_path / "part.pt")
+    with pytest.raises(ValueError, match="not a training checkpoint"):
+        slim_checkpoint(tmp_path / "part.pt", tmp_path / "never.pt")
+    assert not (tmp_path / "never.pt").exists()

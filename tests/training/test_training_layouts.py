@@ -163,33 +163,38 @@ def test_single_agent_copies_cycle_scenarios_with_the_same_spaces():
 
 
 def test_critic_ablation_configs_differ_from_scratch_only_in_what_they_ablate():
-    """(b) and (c) of the centralised-critic study extend scratch.yaml (``base:``) and change
-    only the critic's input or the mode, so the three runs share every other setting."""
+    """(b) and (c) of the centralised-critic study extend scratch_v0.yaml (``base:``) and change
+    only the critic's input or the mode, so the three runs share every other setting;
+    scratch.yaml is scratch_v0.yaml under rules v1."""
     from agents.training.config import load_train_config
 
-    scratch = to_dict(load_train_config("scratch"))
+    scratch = to_dict(load_train_config("scratch_v0"))
     for name, changed in [("scratch_independent", {"critic": "observation"}),
-                          ("scratch_single", {"mode": "single_agent"})]:
+                          ("scratch_single", {"mode": "single_agent"}), ("scratch", {"rules": 1})]:
         cfg = to_dict(load_train_config(name))
         assert {k: v for k, v in cfg.items() if cfg[k] != scratch[k]} == changed
 
 
 def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm_start():
     """Every YAML file under configs/train/ (subfolders too) is a valid train config; the
-    default distils an ensemble of fits before PPO, single_fit.yaml is the default without
-    that stage, and ppo_stage/sharpened.yaml keeps single_fit's warm start (its PPO stage alone
-    differs), as it was measured."""
+    default trains under rules v1 with one DAgger round and no ensemble; ensemble_v0.yaml (the
+    default under rules v0) distils an ensemble of fits before PPO, single_fit.yaml is it
+    without that stage, and ppo_stage/sharpened.yaml keeps single_fit's warm start (its PPO
+    stage alone differs), as they were measured."""
     from agents.training.config import TRAIN_CONFIG_DIR, load_train_config
 
     files = sorted(TRAIN_CONFIG_DIR.rglob("*.yaml"))
-    assert len(files) >= 8
+    assert len(files) >= 9
     for path in files:
         load_train_config(path)
     default = to_dict(load_train_config("default"))
+    assert default["rules"] == 1 and default["ensemble"]["fits"] == 0
+    assert default["pretrain"]["dagger_rounds"] == 1 and default["pretrain"]["teacher"] == "rollout"
+    old = to_dict(load_train_config("ensemble_v0"))
     single = to_dict(load_train_config("single_fit"))
     stage = to_dict(load_train_config("ppo_stage/sharpened"))
-    assert default["ensemble"]["fits"] == 4 and single["ensemble"]["fits"] == 0
-    assert {k: v for k, v in single.items() if v != default[k]} == {"ensemble": single["ensemble"]}
+    assert old["rules"] == 0 and old["ensemble"]["fits"] == 4 and single["ensemble"]["fits"] == 0
+    assert {k: v for k, v in single.items() if v != old[k]} == {"ensemble": single["ensemble"]}
     for key in ("pretrain", "model", "scenarios", "seed", "lost_vehicle_penalty", "mode", "ensemble"):
         assert stage[key] == single[key], key
     assert stage["warm_start_temperature"] == 0.3 and default["warm_start_temperature"] == 1.0
