@@ -63,10 +63,43 @@ def bench_inference(repeats: int = 200) -> list[dict[str, Any]]:
                 t = time.perf_counter()
                 actor(sub)
                 times.append(time.perf_counter() - t)
-        rows.append({"batch": batch, "latency_ms_median": 1e3 * statistics.median(times),
+        rows.append({"batch": batch, "path": "torch",
+                     "latency_ms_median": 1e3 * statistics.median(times),
                      "latency_ms_p90": 1e3 * float(np.percentile(times, 90))})
         print(f"  actor batch {batch:3d}: {rows[-1]['latency_ms_median']:.2f} ms", file=sys.stderr)
+    rows.append(_numpy_latency(actor, repeats))
+    print(f"  actor batch   1, NumPy: {rows[-1]['latency_ms_median']:.3f} ms", file=sys.stderr)
     return rows
+
+
+def _numpy_latency(actor, repeats: int) -> dict[str, Any]:
+    """The greedy controller's path (agents/gcn/fast.py): one AEC observation of a dispatcher's
+    day on `paper`, scored by the actor's NumPy forward pass."""
+    from agents.controllers.dispatcher import DispatcherController
+    from agents.gcn.fast import FastGraphActor
+    from marl_vertiport import vertiport_v1
+
+    env = vertiport_v1.env(config="paper")
+    env.reset(seed=0)
+    dispatcher = DispatcherController()
+    dispatcher.bind(env.unwrapped.sim)
+    observations = []
+    for _ in range(200):  # observations of vehicles in every status
+        obs = env.observe(env.agent_selection)
+        observations.append(obs)
+        env.step(dispatcher.act(obs))
+    env.close()
+    fast = FastGraphActor(actor)
+    for obs in observations[:10]:
+        fast.act(obs)
+    times = []
+    for k in range(repeats):
+        obs = observations[k % len(observations)]
+        t = time.perf_counter()
+        fast.act(obs)
+        times.append(time.perf_counter() - t)
+    return {"batch": 1, "path": "numpy", "latency_ms_median": 1e3 * statistics.median(times),
+            "latency_ms_p90": 1e3 * float(np.percentile(times, 90))}
 
 
 def child_run(*args: str) -> tuple[dict[str, Any], float]:

@@ -265,7 +265,9 @@ def report(results: dict[str, Any]) -> str:
         lines.append(f"| {r['copies']} | {r['processes']} | {r['env_steps_per_s']:,.0f} |")
     lines += ["", "## Policy and training", "", "| measure | value |", "|---|---:|"]
     for r in results["inference"]:
-        lines.append(f"| actor latency, batch {r['batch']} (median / p90) | "
+        path = ("torch" if r.get("path", "torch") == "torch"
+                else "NumPy forward pass, as the greedy controller plays")
+        lines.append(f"| actor latency, batch {r['batch']}, {path} (median / p90) | "
                      f"{r['latency_ms_median']:.2f} / {r['latency_ms_p90']:.2f} ms |")
     t = results["training"]
     lines += [

@@ -42,7 +42,8 @@ def test_bench_smoke(tmp_path):
     assert data["profile"]["workload"] == "heuristic" and data["profile"]["steps"] == 1440
     assert data["profile"]["top"] and all(0 <= e["own_share"] <= 1 for e in data["profile"]["top"])
     assert [(r["copies"], r["processes"]) for r in data["vector"]] == [(2, 1), (2, 1), (2, 2)]
-    assert [r["batch"] for r in data["inference"]] == [1, 64]
+    assert [(r["batch"], r["path"]) for r in data["inference"]] == [
+        (1, "torch"), (64, "torch"), (1, "numpy")]
     assert data["training"]["env_steps_per_s"] > 0 and data["training"]["peak_memory_mb"] > 0
     assert data["env_peak_memory_mb"] > 0
     assert [r["api"] for r in data["api_floor"]] == ["aec", "single_agent"]
