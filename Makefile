@@ -74,10 +74,10 @@ TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 train: $(STAMP)  ## train the GCN policy (CONFIG=default|paper|path, RESUME=runs/train/<run>, WORKERS=1 for one process)
 	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
 
-check-train: $(STAMP)  ## train as make train does (or CHECKPOINT=path), then pair it with the shipped checkpoint on 200 validation days: M, every safety metric and a verdict (7 minutes on an idle 2-core AVX-512 machine)
+check-train: $(STAMP)  ## train as make train does (or CHECKPOINT=path), then pair it with the shipped checkpoint on 200 validation days: M, every safety metric and a verdict (training takes 6 to 7 minutes on an idle 2-core Intel Xeon, the 400 days about 3 more)
 	$(CLI) check-train $(if $(CHECKPOINT),--checkpoint $(CHECKPOINT)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
 
-check-train-margin: $(STAMP)  ## measure M of check-train: train seeds 0, 1 and 2 of the default config, play them on the check's days (17 minutes there)
+check-train-margin: $(STAMP)  ## measure M of check-train: train seeds 0, 1 and 2 of the default config, play them on the check's days (22 minutes on an idle 2-core Intel Xeon)
 	for seed in 0 1 2; do $(CLI) train --config default --seed $$seed --no-eval --run-dir runs/check-train-margin/seed$$seed $(RUN_ON) || exit 1; done
 	$(CLI) check-train --margin runs/check-train-margin/seed0 runs/check-train-margin/seed1 runs/check-train-margin/seed2 --out runs/check-train-margin/margin $(RUN_ON)
 
@@ -100,7 +100,7 @@ results: $(STAMP)  ## regenerate every shipped result of the shipped policy but 
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
 
-bar: $(STAMP)  ## the learned ATC against the bar: handback on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; about 55 minutes on an idle 2-core Intel Xeon)
+bar: $(STAMP)  ## the learned ATC against the bar: handback on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 91 minutes on a 2-core Intel Xeon shared with other jobs for part of the run)
 	$(CLI) evaluate --agents handback --configs paper paper_uncertain paper_uncertain_10 --episodes $(BAR_DAYS) --out docs/results/bar --report docs/results/bar.md $(RUN_ON)
 	for base in heuristic gcn rollout; do $(PY) -m agents.evaluate.paired docs/results/episodes.csv docs/results/bar/episodes.csv --pair $$base handback --csv docs/results/bar/paired_$$base.csv || exit 1; echo; done > docs/results/bar_paired.md
 
