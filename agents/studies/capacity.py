@@ -170,8 +170,10 @@ def _analytic(configs: list[str]) -> int:
     for c in rows:
         print(f"{c.name}: {c.verdict}: {c.reason}")
     print("\nThe model counts charging ports, energy and turns, not the separation check's holds: "
-          "it calls `wide` and a 40-eVTOL vertiport with a charging port per vehicle carried, yet "
-          "both still lose vehicles (docs/environment.md, sections 8.3 and 8.4).")
+          "it calls `wide` and configs/studies/fleet40_all_pads_charging.yaml carried, yet both "
+          "still lose vehicles; `fleet40` is carried on days too, its departures waiting on "
+          "their charging ports and its flight plans asking less (docs/environment.md, sections "
+          "8.3 and 8.4).")
     return 0
 
 

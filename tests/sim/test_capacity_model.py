@@ -33,7 +33,7 @@ def test_rules_v1_calibrate_a_trip_to_the_papers_code_and_v0_keeps_the_old_drain
 @pytest.mark.parametrize("name, verdict", [
     ("paper", "carried"), ("paper_uncertain", "carried"), ("small", "carried"),
     ("large", "carried"), ("paper_overloaded", "overloaded"), ("large_overloaded", "overloaded"),
-    ("fleet40_overloaded", "overloaded"),
+    ("fleet40", "carried"), ("fleet40_overloaded", "overloaded"),
 ])
 def test_verdicts_of_shipped_configs(name, verdict):
     assert capacity(load_config(name)).verdict == verdict
@@ -79,6 +79,21 @@ def test_verdicts_agree_with_days_of_the_dispatcher():
     assert lost_per_day("paper_overloaded", range(800000, 800003)) >= 1.0
     assert lost_per_day("large_overloaded", range(800000, 800001)) >= 4.0
     assert lost_per_day("large", range(800000, 800002)) == 0.0
+
+
+def test_fleet40_is_carried_where_trailing_departures_lose_vehicles():
+    # The same 40 pads, all charging ports: with flights cleared behind departures (and the
+    # paper's turnaround) departures held over their pads at the hover drain land back empty;
+    # fleet40 keeps departures on their chargers until their leg clears (validation day).
+    assert lost_per_day("fleet40", [800000]) == 0.0
+    held = load_config("fleet40", **{"atc.trail_departures": True, "atc.trail_chains": False,
+                                     "schedule.takeoff_after_landing_min": [10, 20],
+                                     "schedule.initial_takeoff_min": [5, 20]})
+    env = vertiport_v1.env(config=held)
+    lost = [run_aec_episode(env, make_controller("heuristic"), seed=s)["stranded"]
+            for s in (800001,)]
+    env.close()
+    assert sum(lost) >= 1
 
 
 def test_cli_prints_the_table_and_names_a_broken_config(capsys, tmp_path):

@@ -20,7 +20,7 @@ from marl_vertiport.sim.schema import (
 )
 
 SHIPPED = ["paper", "paper_uncertain", "paper_uncertain_10", "small", "twin", "wide", "mid",
-           "large", "large_overloaded", "fleet40_overloaded", "paper_overloaded"]
+           "large", "large_overloaded", "fleet40", "fleet40_overloaded", "paper_overloaded"]
 TEN = {"uncertainty.wind_gust_prob": 0.1, "uncertainty.charger_failure_prob": 0.1,
        "uncertainty.takeoff_failure_prob": 0.1, "uncertainty.action_misread_prob": 0.1,
        "uncertainty.position_noise_std_m": 1.0}
