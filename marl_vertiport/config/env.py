@@ -317,6 +317,27 @@ def _check_spacing(cfg: EnvConfig) -> None:
         _check(chord >= spacing, "layout.hover_ring_radius_m",
                f"{lay.hover_ring_count} spots on a ring of {lay.hover_ring_radius_m:g} m stand "
                f"{chord:.3g} m apart: a hover spot {rule}")
+    # A vehicle hovering over a spot and one parked on a pad: at least the separation apart in
+    # 3-D, counting the hover altitude less a vehicle size (conservative) as their height apart.
+    if spots:
+        ring_xy = []
+    elif lay.hover_ring_count >= 1:
+        ring_xy = [(f"layout.hover_ring_radius_m (spot {k})",
+                    (lay.hover_ring_radius_m * math.cos(math.pi / lay.hover_ring_count
+                                                        + 2.0 * math.pi * k / lay.hover_ring_count),
+                     lay.hover_ring_radius_m * math.sin(math.pi / lay.hover_ring_count
+                                                        + 2.0 * math.pi * k / lay.hover_ring_count)))
+                   for k in range(lay.hover_ring_count)]
+    else:
+        ring_xy = []
+    height = max(0.0, cfg.flight.hover_altitude_m - cfg.flight.vehicle_size_m)
+    for name_s, s_xy in spots + ring_xy:
+        for name_p, p_xy in pads:
+            d = math.hypot(math.dist(s_xy, p_xy), height)
+            _check(d >= cfg.safety.min_separation_m, name_s.split(" (")[0],
+                   f"{name_s} is {d:.3g} m from {name_p} in 3-D (hovering {height:g} m above "
+                   f"it, counting a vehicle size): less than safety.min_separation_m = "
+                   f"{cfg.safety.min_separation_m:g} m")
 
 
 def _validate(cfg: EnvConfig) -> None:

@@ -253,3 +253,11 @@ def test_set_typos_in_the_evaluation_name_the_field(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "fleet_sise: unknown key (known: atc, battery, fleet_size" in err
     assert "unexpected keyword" not in err
+
+
+def test_a_separation_wider_than_hover_spots_stand_from_pads_is_a_named_error():
+    # Paper layout at 9 m: a vehicle hovering over a ring spot is 8 m from one parked on port 1.
+    with pytest.raises(ConfigError, match=r"^layout.hover_ring_radius_m: .*safety.min_separation_m = 9 m"):
+        load_config("paper", **{"safety.min_separation_m": 9.0})
+    with pytest.raises(ConfigError, match=r"^layout.hover_spots_xy_m\[0\]"):
+        load_config("paper", **{"safety.min_separation_m": 5.0, "layout.hover_spots_xy_m": [[6.0, 1.0]]})
