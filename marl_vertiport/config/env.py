@@ -317,26 +317,22 @@ def _check_spacing(cfg: EnvConfig) -> None:
         _check(chord >= spacing, "layout.hover_ring_radius_m",
                f"{lay.hover_ring_count} spots on a ring of {lay.hover_ring_radius_m:g} m stand "
                f"{chord:.3g} m apart: a hover spot {rule}")
-    # A vehicle hovering over a spot and one parked on a pad: at least the separation apart in
-    # 3-D, counting the hover altitude less a vehicle size (conservative) as their height apart.
-    if spots:
-        ring_xy = []
-    elif lay.hover_ring_count >= 1:
-        ring_xy = [(f"layout.hover_ring_radius_m (spot {k})",
-                    (lay.hover_ring_radius_m * math.cos(math.pi / lay.hover_ring_count
-                                                        + 2.0 * math.pi * k / lay.hover_ring_count),
-                     lay.hover_ring_radius_m * math.sin(math.pi / lay.hover_ring_count
-                                                        + 2.0 * math.pi * k / lay.hover_ring_count)))
-                   for k in range(lay.hover_ring_count)]
-    else:
-        ring_xy = []
+    # A vehicle hovering at a spot and one parked on a pad: at least the separation apart in 3-D,
+    # counting the hover altitude less a vehicle size (conservative) as their height apart. Ring
+    # spots stand where sim.layout.ring puts them (phase pi / count); config cannot import sim.
+    n, r = lay.hover_ring_count, lay.hover_ring_radius_m
+    hover = [(name, "", xy) for name, xy in spots] or [
+        ("layout.hover_ring_radius_m", f"spot {k} of the ring ",
+         (r * math.cos(math.pi / n + 2.0 * math.pi * k / n),
+          r * math.sin(math.pi / n + 2.0 * math.pi * k / n)))
+        for k in range(n)]
     height = max(0.0, cfg.flight.hover_altitude_m - cfg.flight.vehicle_size_m)
-    for name_s, s_xy in spots + ring_xy:
+    for field_name, label, s_xy in hover:
         for name_p, p_xy in pads:
             d = math.hypot(math.dist(s_xy, p_xy), height)
-            _check(d >= cfg.safety.min_separation_m, name_s.split(" (")[0],
-                   f"{name_s} is {d:.3g} m from {name_p} in 3-D (hovering {height:g} m above "
-                   f"it, counting a vehicle size): less than safety.min_separation_m = "
+            _check(d >= cfg.safety.min_separation_m, field_name,
+                   f"{label}is {d:.3g} m from {name_p} in 3-D (hovering {height:g} m above it, "
+                   f"counting a vehicle size): less than safety.min_separation_m = "
                    f"{cfg.safety.min_separation_m:g} m")
 
 
