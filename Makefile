@@ -33,7 +33,7 @@ BAR_DAYS ?= 100
 BACKEND  ?= local
 RUN_ON    = --backend $(BACKEND)
 
-.PHONY: help venv test test-fast check-results fuzz soak train check-train check-train-margin curves evaluate sweep results bar safety render bench bench-compare env-demo clean
+.PHONY: help venv test test-fast check-results fuzz soak train check-train check-train-margin curves evaluate sweep results bar safety render bench bench-ecosystem bench-compare env-demo clean
 
 help:  ## list the targets
 	@awk 'BEGIN {FS = ":.*## "} /^[a-zA-Z_-]+:.*## / {printf "  make %-18s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
@@ -44,11 +44,11 @@ $(PY):
 	$(PIP) install --quiet --upgrade pip
 
 # torch first, pinned to the CPU build, so nothing later pulls a CUDA build. The ray extra
-# (the ray backend) and the torchrl and rllib extras (agents/interop/) are installed too, so that
-# `make test` runs their tests.
+# (the ray backend) and the torchrl, rllib and sb3 extras (agents/interop/) are installed too,
+# so that `make test` runs their tests.
 $(STAMP): $(PY) pyproject.toml
 	$(PIP) install --quiet torch==2.13.0
-	$(PIP) install --quiet -e '.[test,ray,torchrl,rllib]'
+	$(PIP) install --quiet -e '.[test,ray,torchrl,rllib,sb3]'
 	@touch $(STAMP)
 
 venv: $(STAMP)  ## create .venv and install the project with pinned dependencies
@@ -118,6 +118,9 @@ render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/
 
 bench: $(STAMP)  ## measure env, physics, vector, inference and training speed (docs/performance.md)
 	$(CLI) bench --out runs/bench --report docs/performance.md
+
+bench-ecosystem: $(STAMP)  ## the env's speed through each library of docs/ecosystem.md (PettingZoo AEC and Parallel, Gymnasium, SuperSuit, TorchRL, SB3): steps per second, one process (runs/bench/ecosystem.json; about 2 minutes)
+	$(PY) -m agents.bench.ecosystem --out runs/bench
 
 bench-compare: $(STAMP)  ## the env under the dispatcher's traffic here and in the checkout BASE=path (a git worktree of another commit): medians of 5 interleaved replays and their ratio
 	@test -n "$(BASE)" || { echo "make bench-compare: give BASE=path, a checkout of the commit to compare with (git worktree add /tmp/base <commit>)" >&2; exit 2; }

@@ -20,9 +20,11 @@ __all__ = ["ENV_ID", "ENV_IDS", "register", "register_when_gymnasium_loads"]
 
 #: The latest version's id.
 ENV_ID = "marl_vertiport/Vertiport-v1"
-#: Every version's id and its env class.
+#: Every version's id and its env class; ``VertiportFlat-v1`` is the latest version with the
+#: flat ``Box`` observation (:mod:`marl_vertiport.flat`).
 ENV_IDS = {"marl_vertiport/Vertiport-v1": "marl_vertiport.gym_env:VertiportEnv",
-           "marl_vertiport/Vertiport-v0": "marl_vertiport.gym_env:VertiportEnvV0"}
+           "marl_vertiport/Vertiport-v0": "marl_vertiport.gym_env:VertiportEnvV0",
+           "marl_vertiport/VertiportFlat-v1": "marl_vertiport.flat:make_flat_env"}
 
 
 def register() -> None:

@@ -85,9 +85,11 @@ class ObservationBuilder:
         })
         self.action_space = spaces.Discrete(a)
 
-    def observe(self, v: int) -> dict:
+    def observe(self, v: int, action_mask: np.ndarray | None = None) -> dict:
         """The observation of vehicle ``v`` (new arrays): :meth:`observe_into` for one row,
-        written out for the env's hot path (a test holds the two equal)."""
+        written out for the env's hot path (a test holds the two equal). ``action_mask``
+        (``(A,)`` int8) replaces the vehicle's own mask (the Parallel env's no-op mask of an
+        agent whose turn it is not)."""
         sim = self.sim
         base = sim.evtol_features()
         evtols = base.copy()
@@ -95,7 +97,7 @@ class ObservationBuilder:
         return {
             "observation": {"port_nodes": sim.port_features().copy(), "evtol_nodes": evtols,
                             "self": base[v, : len(SELF_FEATURES)].copy()},
-            "action_mask": sim.action_mask(v).copy(),
+            "action_mask": (sim.action_mask(v) if action_mask is None else action_mask).copy(),
         }
 
     def observe_into(self, observers: Sequence[int], port_nodes: np.ndarray,

@@ -20,9 +20,11 @@ from typing import Any
 from pettingzoo import AECEnv
 
 from marl_vertiport.aec_env import OrderEnforcing, VertiportAEC, reset_agent_dicts
+from marl_vertiport.parallel_env import VertiportParallel
 from marl_vertiport.config import EnvConfig
 
-__all__ = ["OrderEnforcing", "env", "raw_env", "reset_agent_dicts"]
+__all__ = ["OrderEnforcing", "env", "parallel_env", "parallel_raw_env", "raw_env",
+           "reset_agent_dicts"]
 
 
 def env(config: str | EnvConfig | dict | None = None, render_mode: str | None = None,
@@ -36,3 +38,17 @@ class raw_env(VertiportAEC):
 
     RULES = 0
     metadata = dict(VertiportAEC.metadata, name="vertiport_v0")
+
+
+class parallel_raw_env(VertiportParallel):
+    """The Parallel env (one parallel step = one ATC turn; :mod:`marl_vertiport.parallel_env`)."""
+
+    RULES = 0
+    metadata = dict(VertiportParallel.metadata, name="vertiport_v0")
+
+
+def parallel_env(config: str | EnvConfig | dict | None = None, render_mode: str | None = None,
+                 **overrides: Any) -> VertiportParallel:
+    """The PettingZoo Parallel env: the same simulator, one parallel step per ATC turn; the
+    agents whose turn it is not may only wait (:mod:`marl_vertiport.parallel_env`)."""
+    return parallel_raw_env(config=config, render_mode=render_mode, **overrides)

@@ -33,12 +33,19 @@ Rewards:
 Episode end:
     Truncation after ``schedule.episode_steps`` (1440) steps; never termination.
 
+Parallel API:
+    ``parallel_env()`` is the same simulator as a PettingZoo Parallel env in which one parallel
+    step is one ATC turn: every live agent submits an action, the agent whose turn it is
+    (``acting_agent``) has its full mask, every other agent only the no-op ``continue``
+    (``noop_action``). See :mod:`marl_vertiport.parallel_env`.
+
 Arguments:
     ``config``: a config object, a dict, a YAML path, or a name in ``configs/env/``;
     ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``; keyword overrides with dotted
     keys (``**{"uncertainty.wind_gust_prob": 0.1}``) or whole sections.
 
 Version history:
+    v1 (later): ``parallel_env()``, the Parallel API.
     v1: the separation check and the airspace procedures (arrivals at
     ``flight.arrival_altitude_m``, holding slots, a reversing gust held inside the protected
     volume); ``info["episode"]`` adds the day's minimum separation and its minutes in loss of
@@ -54,9 +61,11 @@ from typing import Any
 from pettingzoo import AECEnv
 
 from marl_vertiport.aec_env import OrderEnforcing, VertiportAEC, reset_agent_dicts
+from marl_vertiport.parallel_env import VertiportParallel
 from marl_vertiport.config import EnvConfig
 
-__all__ = ["OrderEnforcing", "env", "raw_env", "reset_agent_dicts"]
+__all__ = ["OrderEnforcing", "env", "parallel_env", "parallel_raw_env", "raw_env",
+           "reset_agent_dicts"]
 
 
 def env(config: str | EnvConfig | dict | None = None, render_mode: str | None = None,
@@ -70,3 +79,17 @@ class raw_env(VertiportAEC):
 
     RULES = 1
     metadata = dict(VertiportAEC.metadata, name="vertiport_v1")
+
+
+class parallel_raw_env(VertiportParallel):
+    """The Parallel env (one parallel step = one ATC turn; :mod:`marl_vertiport.parallel_env`)."""
+
+    RULES = 1
+    metadata = dict(VertiportParallel.metadata, name="vertiport_v1")
+
+
+def parallel_env(config: str | EnvConfig | dict | None = None, render_mode: str | None = None,
+                 **overrides: Any) -> VertiportParallel:
+    """The PettingZoo Parallel env: the same simulator, one parallel step per ATC turn; the
+    agents whose turn it is not may only wait (:mod:`marl_vertiport.parallel_env`)."""
+    return parallel_raw_env(config=config, render_mode=render_mode, **overrides)

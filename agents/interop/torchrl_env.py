@@ -16,6 +16,15 @@ What TorchRL needs from the env, and where it finds it:
   whole fleet; the graph observation arrives nested at ``("evtol", "observation",
   "observation", key)``.
 
+The Parallel env (``vertiport_v1.parallel_env``, one parallel step per ATC turn) goes in the
+same wrapper the way BenchMARL's PettingZoo tasks build theirs (:func:`make_parallel_env`:
+``use_mask`` off, every agent submits an action each step, the agents whose turn it is not
+with the no-op alone in their ``action_mask``); with ``flat=True`` the observation is the flat
+``Box`` of :mod:`marl_vertiport.flat` at ``("evtol", "observation")``, the one tensor
+BenchMARL's models read. :func:`ppo` then takes every agent's row into the loss (MAPPO-style):
+a row whose mask leaves one action has a log-probability of 0 and adds nothing to the
+objective, only to the critic.
+
 A minimal run::
 
     from agents.interop.torchrl_env import make_env, make_actor, make_critic, ppo
@@ -40,7 +49,7 @@ from agents.interop.nets import mlp, symlog
 from marl_vertiport import vertiport_v1
 
 __all__ = ["ACTING", "ACTION", "ACTION_MASK", "GROUP", "LOG_PROB", "OBSERVATION", "VALUE",
-           "make_actor", "make_critic", "make_env", "ppo"]
+           "make_actor", "make_critic", "make_env", "make_parallel_env", "ppo"]
 
 EXTRA = "torchrl"
 require("torchrl", EXTRA)  # fail at import, with the install command, without the extra
@@ -72,6 +81,33 @@ def make_env(config: Any = "paper", *, seed: int | None = None, return_state: bo
                                  group_map={GROUP: list(aec.possible_agents)})
 
 
+def make_parallel_env(config: Any = "paper", *, seed: int | None = None,
+                      return_state: bool = True, flat: bool = False, **overrides: Any):
+    """The Parallel env (``vertiport_v1.parallel_env``) behind TorchRL's ``PettingZooWrapper``
+    as a BenchMARL PettingZoo task builds it (``categorical_actions=True``, ``use_mask`` off,
+    ``return_state``), all agents in the group ``"evtol"``; ``flat=True`` wraps it in
+    :class:`marl_vertiport.flat.FlatParallel` first (one observation tensor per agent)."""
+    from torchrl.envs import PettingZooWrapper
+
+    from marl_vertiport.flat import FlatParallel
+
+    par = vertiport_v1.parallel_env(config=config, **overrides)
+    if flat:
+        par = FlatParallel(par)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="PettingZoo in TorchRL is tested")
+        return PettingZooWrapper(env=par, categorical_actions=True, return_state=return_state,
+                                 seed=seed, device="cpu",
+                                 group_map={GROUP: list(par.possible_agents)})
+
+
+def _observation_key(env) -> tuple:
+    """Where the group's observation sits: nested graphs (:data:`OBSERVATION`) or one tensor
+    (``("evtol", "observation")``, the flat observation)."""
+    spec = env.observation_spec[GROUP, "observation"]
+    return OBSERVATION if hasattr(spec, "keys") else (GROUP, "observation")
+
+
 class _Flatten(nn.Module):
     """The inputs' last ``event_dims[i]`` dimensions raveled and joined, then symlog."""
 
@@ -88,6 +124,9 @@ def _group_keys(spec, prefix: tuple, batch_dims: int) -> tuple[list, tuple[int, 
     """The leaf keys under ``prefix`` of an observation spec, their event dimensions (beyond
     ``batch_dims``) and their total size."""
     sub = spec[prefix]
+    if not hasattr(sub, "keys"):  # one tensor (the flat observation)
+        shape = sub.shape[batch_dims:]
+        return [prefix], (max(len(shape), 1),), int(torch.Size(shape).numel())
     keys, dims, size = [], [], 0
     for key in sub.keys():
         shape = sub[key].shape[batch_dims:]
@@ -114,7 +153,7 @@ def make_actor(env, hidden: int = 64):
 
     n_agents = env.full_action_spec[ACTION].shape[-1]
     n_actions = env.full_action_spec[ACTION].space.n
-    keys, dims, size = _group_keys(env.observation_spec, OBSERVATION, 1)
+    keys, dims, size = _group_keys(env.observation_spec, _observation_key(env), 1)
     net = TensorDictModule(_ActorNet(dims, size, n_actions, hidden), in_keys=keys,
                            out_keys=[LOGITS])
     assert env.observation_spec[ACTION_MASK].shape == (n_agents, n_actions)
@@ -155,7 +194,7 @@ def make_critic(env, hidden: int = 64, centralised: bool | None = None):
         keys, dims, size = _group_keys(env.observation_spec, ("state",), 0)
         module = _CentralCritic(dims, size, n_agents, hidden)
     else:
-        keys, dims, size = _group_keys(env.observation_spec, OBSERVATION, 1)
+        keys, dims, size = _group_keys(env.observation_spec, _observation_key(env), 1)
         module = _ActorNet(dims, size, 1, hidden)
     return TensorDictModule(module, in_keys=keys, out_keys=[VALUE])
 
@@ -164,11 +203,12 @@ def ppo(env, actor, critic, *, iterations: int = 3, frames_per_batch: int = 64,
         epochs: int = 4, minibatch_size: int = 32, lr: float = 3e-4, gamma: float = 0.99,
         lmbda: float = 0.95, clip_epsilon: float = 0.2, entropy_coeff: float = 0.01,
         seed: int = 0) -> Iterator[dict[str, float]]:
-    """TorchRL's PPO on the env: a ``Collector`` gathers ``frames_per_batch`` AEC steps, GAE
+    """TorchRL's PPO on the env: a ``Collector`` gathers ``frames_per_batch`` steps, GAE
     (per agent, over every step) gives the advantages, and ``ClipPPOLoss`` is minimised over
-    the acting agents' rows only. Yields one dict per iteration: the steps collected, the
-    acting agents' steps and illegal actions among them, the episodes ended, the acting
-    agents' summed reward and the last minibatch's losses."""
+    the acting agents' rows only on the AEC env (``use_mask``), over every agent's row on the
+    Parallel env. Yields one dict per iteration: the steps collected, the acting agents' steps
+    (one a step) and illegal actions among every submitted action, the episodes ended, the
+    summed reward and the last minibatch's losses."""
     from torchrl.collectors import Collector
     from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
@@ -177,7 +217,9 @@ def ppo(env, actor, critic, *, iterations: int = 3, frames_per_batch: int = 64,
                        normalize_advantage=False)
     loss.set_keys(action=ACTION, sample_log_prob=LOG_PROB, value=VALUE, reward=REWARD,
                   done=(GROUP, "done"), terminated=(GROUP, "terminated"))
-    loss.loss_mask_key = ACTING  # only the agent that acted on a step has a loss there
+    aec = bool(getattr(env, "use_mask", False))
+    if aec:
+        loss.loss_mask_key = ACTING  # only the agent that acted on a step has a loss there
     loss.make_value_estimator(ValueEstimators.GAE, gamma=gamma, lmbda=lmbda)
     optim = torch.optim.Adam(loss.parameters(), lr=lr)
     collector = Collector(env, actor, frames_per_batch=frames_per_batch,
@@ -185,8 +227,9 @@ def ppo(env, actor, critic, *, iterations: int = 3, frames_per_batch: int = 64,
                           auto_register_policy_transforms=False)
     try:
         for it, data in enumerate(collector):
-            acting = data[ACTING]
             chosen = data[ACTION_MASK].gather(-1, data[ACTION].unsqueeze(-1)).squeeze(-1)
+            # The Parallel env: every agent submits an action, and every one must be legal.
+            acting = data[ACTING] if aec else torch.ones_like(chosen)
             with torch.no_grad():
                 loss.value_estimator(data, params=loss.critic_network_params,
                                      target_params=loss.target_critic_network_params)
@@ -204,7 +247,7 @@ def ppo(env, actor, critic, *, iterations: int = 3, frames_per_batch: int = 64,
                         last[key] = float(out[key].detach())
             collector.update_policy_weights_()
             yield {"iteration": it, "frames": steps,
-                   "acting_steps": int(acting.sum()),
+                   "acting_steps": int(data[ACTING].sum()) if aec else steps,
                    "illegal_actions": int((acting & ~chosen).sum()),
                    "episodes_ended": int(data["next", "done"].sum()),
                    "reward": float(data["next", *REWARD][acting].sum()),

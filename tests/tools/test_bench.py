@@ -186,3 +186,20 @@ def test_compare_times_the_env_of_another_checkout_on_the_same_traffic(tmp_path)
     assert result["steps"] > 1000 and len(result["runs"]["base"]) == len(result["runs"]["this"]) == 1
     assert result["ratio"] > 0
     assert main(["--base", str(tmp_path)]) == 2  # not a checkout: refused
+
+
+def test_ecosystem_bench_measures_every_row_and_names_a_missing_extra(tmp_path, monkeypatch):
+    from agents.bench import ecosystem
+
+    assert ecosystem.main(["--steps", "60", "--train-steps", "512", "--repeats", "1",
+                           "--out", str(tmp_path)]) == 0
+    data = json.loads((tmp_path / "ecosystem.json").read_text())
+    rows = {r["name"]: r for r in data["rows"]}
+    assert set(rows) == set(ecosystem.MEASURES)
+    for row in rows.values():
+        if "missing" not in row:
+            assert row["min_steps_per_s"] <= row["steps_per_s"] <= row["max_steps_per_s"]
+            assert row["steps_per_s"] > 0
+    monkeypatch.setitem(ecosystem.EXTRA_MODULES, "sb3", "a_module_that_is_not_there")
+    row = ecosystem.measure("sb3_maskable_ppo", 10, 1)
+    assert row["missing"] == "pip install -e '.[sb3]'" and "steps_per_s" not in row

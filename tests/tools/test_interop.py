@@ -26,6 +26,7 @@ STEPS = 64  # a short day: every PPO iteration below ends at least one episode
 SHORT = {"schedule.episode_steps": STEPS}
 
 TORCHRL_MISSING = "the torchrl extra is not installed: pip install -e '.[torchrl]'"
+SB3_MISSING = "the sb3 extra is not installed: pip install -e '.[sb3]'"
 RLLIB_MISSING = "the rllib extra is not installed: pip install -e '.[rllib]'"
 
 
@@ -131,6 +132,58 @@ def test_torchrl_ppo_three_iterations(torchrl_env):
     assert _changed(actor_before, actor) and _changed(critic_before, critic)
 
 
+@pytest.mark.parametrize("flat", [False, True])
+def test_torchrl_parallel_env_as_benchmarl_builds_it_and_ppo_on_every_row(torchrl_env, flat):
+    """The Parallel env in ``PettingZooWrapper`` as a BenchMARL PettingZoo task builds it (no
+    ``use_mask``: every agent acts every step), nested graphs or the flat Box, and PPO on
+    every agent's row with a centralised critic (MAPPO-style)."""
+    torch.manual_seed(0)
+    env = torchrl_env.make_parallel_env("paper", seed=0, flat=flat, **SHORT)
+    assert not env.use_mask and env.group_map == {"evtol": [f"evtol_{i}" for i in range(4)]}
+    obs_spec = env.observation_spec["evtol", "observation"]
+    if flat:
+        assert obs_spec.shape == (4, 4 * 13 + 10 * 4 + 11 + 14)
+    data = env.rollout(STEPS + 10, break_when_any_done=True)
+    assert data.shape == (STEPS,)
+    legal = data[torchrl_env.ACTION_MASK].sum(-1)  # (steps, agents)
+    # At most one agent a step has a choice; the others only the no-op.
+    assert (legal > 1).sum(-1).le(1).all() and legal.ge(1).all()
+    actor, critic = torchrl_env.make_actor(env), torchrl_env.make_critic(env)
+    before = _params(actor) + _params(critic)
+    stats = list(torchrl_env.ppo(env, actor, critic, iterations=3, frames_per_batch=STEPS,
+                                 epochs=2, minibatch_size=32))
+    for s in stats:
+        assert s["frames"] == STEPS and s["illegal_actions"] == 0 and s["episodes_ended"] == 1
+        assert all(math.isfinite(s[k]) for k in ("loss_objective", "loss_critic", "loss_entropy"))
+    assert _changed(before[:len(_params(actor))], actor) and _changed(before[len(_params(actor)):], critic)
+
+
+# -- Stable-Baselines3 ----------------------------------------------------------------------
+
+
+def test_sb3_maskable_ppo_trains_on_the_flat_env_and_acts_legally():
+    """The documented recipe: sb3-contrib's MaskablePPO ("MlpPolicy") on
+    marl_vertiport/VertiportFlat-v1, a few thousand steps; its masked actions are legal."""
+    pytest.importorskip("sb3_contrib", reason=SB3_MISSING)
+    from stable_baselines3.common.env_checker import check_env
+
+    from agents.interop import sb3
+
+    env = sb3.make_env("paper", **SHORT)
+    check_env(env, warn=False)
+    model = sb3.train("paper", steps=2048, seed=0, n_steps=512, batch_size=128, n_epochs=2, **SHORT)
+    assert model.num_timesteps == 2048
+    fresh = sb3.train("paper", steps=0, seed=0, n_steps=512, **SHORT)
+    assert _changed(_params(fresh.policy), model.policy)  # learning moved the weights
+    obs, _ = env.reset(seed=1)
+    for _ in range(STEPS):
+        mask = env.unwrapped.action_masks()
+        action, _ = model.predict(obs, action_masks=mask, deterministic=False)
+        assert mask[int(action)] == 1
+        obs, _, _, truncated, _ = env.step(int(action))
+    assert truncated
+
+
 # -- RLlib ----------------------------------------------------------------------------------
 
 
@@ -228,6 +281,7 @@ def test_rllib_ppo_three_iterations(rllib_env):
 @pytest.mark.parametrize("module, blocked, extra", [
     ("agents.interop.torchrl_env", "torchrl", "torchrl"),
     ("agents.interop.rllib_env", "ray", "rllib"),
+    ("agents.interop.sb3", "sb3_contrib", "sb3"),
 ])
 def test_an_adapter_without_its_extra_fails_at_import_with_the_install_command(module, blocked, extra):
     """Without the library, importing the adapter fails at once with one line naming the
