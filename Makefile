@@ -16,6 +16,8 @@ EPISODES ?= 50
 EPISODES_GIVEN = $(filter command line environment environment override,$(origin EPISODES))
 CONFIGS  ?= paper paper_uncertain
 OUT      ?= runs/eval
+# make evaluate renders each controller's worst day with its decision log (0: it does not).
+WORST_DAY ?= 1
 AGENT    ?= heuristic
 SWEEP    ?= wind
 CURVES   ?= scratch
@@ -84,11 +86,13 @@ check-train-margin: $(STAMP)  ## measure M of check-train: train seeds 0, 1 and 
 curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), ITERATIONS to override their budget, 95 % intervals over seeds, baselines as lines (runs/curves/; two seeds run at a time; one seed of scratch took 18 minutes on a 2-core Intel Xeon beside one other job)
 	$(CLI) curves --configs $(CURVES) --seeds $(SEEDS) $(if $(ITERATIONS),--iterations $(ITERATIONS)) $(RUN_ON)
 
-evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report (EPISODES=N: its first N days)
+evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report (EPISODES=N: its first N days); then each controller's worst day rendered with its decision log into OUT/worst_day (WORST_DAY=0: not)
 ifdef SUITE
 	$(CLI) evaluate --suite $(SUITE) $(if $(EPISODES_GIVEN),--episodes $(EPISODES)) --out $(OUT)/$(notdir $(basename $(SUITE))) --report $(OUT)/$(notdir $(basename $(SUITE)))/report.md $(RUN_ON)
+	$(if $(filter 0,$(WORST_DAY)),,$(CLI) worst-day $(OUT)/$(notdir $(basename $(SUITE))) --no-progress)
 else
 	$(CLI) evaluate --agents $(AGENTS) --configs $(CONFIGS) --episodes $(EPISODES) --out $(OUT) $(RUN_ON)
+	$(if $(filter 0,$(WORST_DAY)),,$(CLI) worst-day $(OUT) --no-progress)
 endif
 
 sweep: $(STAMP)  ## run the sweep SWEEP of configs/sweeps/ (default wind) into runs/sweeps/SWEEP: tidy CSV, figure with CIs (BACKEND=ray to use a cluster)

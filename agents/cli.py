@@ -8,7 +8,8 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     check-train   train as make train does, then compare with the shipped checkpoint: verdict
     check-results the shipped results name the shipped checkpoint and replay exactly
     curves        learning curves over training seeds, with intervals and baselines
-    render        an animated GIF or MP4 of one episode of a controller
+    render        an animated GIF or MP4 of one episode of a controller, with its decisions
+    worst-day     each controller's worst day of an evaluation, rendered with its decision log
     bench         the speed and memory benchmark (docs/performance.md)
     capacity      the charger study: where the charging ports' minutes go, vehicles lost
     soak          many days with every uncertainty high: invariants after every step, memory
@@ -34,6 +35,7 @@ COMMANDS = {
     "train": ("agents.training.cli", "train the GCN ATC from a train config"),
     "curves": ("agents.curves.cli", "learning curves over training seeds"),
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
+    "worst-day": ("agents.render.worst_day", "each controller's worst day of an evaluation, rendered"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),
     "check-train": ("agents.checks.train", "a fresh training run against the shipped checkpoint"),
     "check-results": ("agents.checks.results", "shipped results: their record and their first days replayed"),

@@ -142,6 +142,19 @@ class GCNController(Controller):
             probs = self.actor.action_probabilities(obs)
             return int(torch.multinomial(probs, 1, generator=self.generator).item())
 
+    def action_probabilities(self, observation: dict) -> np.ndarray:
+        """The policy's probability of each action ``(A,)`` for one AEC observation, 0 on
+        masked ones (the decision log's alternatives; greedy play takes the largest)."""
+        if self._fast is not None:
+            self.check_columns(observation)
+            logits = self._fast.logits(observation).astype(np.float64)
+            mask = np.asarray(observation["action_mask"]).astype(bool)
+            z = np.where(mask, logits, -np.inf)
+            e = np.exp(z - z[mask].max())
+            return e / e.sum()
+        with torch.no_grad():
+            return self.actor.action_probabilities(self.checked_tensors(observation))[0].numpy()
+
     def fast(self) -> Controller:
         """This checkpoint's greedy actions as a stateless controller (``pure_act``), for
         look-aheads that call the policy at every simulated turn. A sampling controller
@@ -217,6 +230,16 @@ class GCNEnsemble(Controller):
             raise CheckpointError(f"an ensemble needs two or more checkpoints, got {len(paths)}")
         self.members = [GCNController(p) for p in paths]
         self.name = "gcn-ensemble:" + "+".join(m.path.name for m in self.members)
+
+    def action_probabilities(self, observation: dict) -> np.ndarray:
+        """The ensemble's policy ``(A,)``: the members' mean log-probabilities, normalised
+        over the legal actions (0 on masked ones)."""
+        obs = self.members[0].checked_tensors(observation)
+        logp = mean_log_probabilities([m.actor for m in self.members], obs)[0].double().numpy()
+        mask = np.asarray(observation["action_mask"]).astype(bool)
+        z = np.where(mask, logp, -np.inf)
+        e = np.exp(z - z[mask].max())
+        return e / e.sum()
 
     def act(self, observation: dict) -> int:
         # Every member reads this version's feature schema (GCNController refuses others), so

@@ -283,6 +283,12 @@ class GuardedController(ScratchRollouts, Controller):
         base's choice, which lost a vehicle (or the base itself ruled one out)."""
         return self.last_changed or bool(getattr(self.base, "last_forced", False))
 
+    def action_probabilities(self, observation: dict) -> np.ndarray | None:
+        """The base's probabilities (the learned policy's proposal, for the decision log), or
+        ``None`` where the base has none."""
+        fn = getattr(self.base, "action_probabilities", None)
+        return None if fn is None else fn(observation)
+
     def _fleet_decides(self, observation: dict) -> int:
         """``fleet``'s choice for the acting vehicle, counted as a decision handed over."""
         self.last_deferred = True

@@ -11,6 +11,7 @@ from agents.common.provenance import describe
 from agents.common.files import write_atomic
 from agents.evaluate.metrics import DIRECTION, METRIC_LABELS, agent_label, case_label
 from agents.evaluate.settings import ACTION_EPISODES, Evaluation
+from agents.evaluate.worst import worst_days
 from agents.evaluate.tables import (
     CSV_DIGITS,
     decimals, episodes_csv, format_cell, format_interval, results_json, summary_csv,
@@ -120,6 +121,24 @@ def _report_table(evaluation: Evaluation, config: str) -> str:
     return "\n".join(lines)
 
 
+def _worst_days_text(evaluation: Evaluation) -> str:
+    """The day each controller should be watched on, per case (:mod:`agents.evaluate.worst`),
+    and the command that replays them rendered with their decision logs."""
+    days = worst_days([{"agent": r.task.agent, "config": r.task.config,
+                        "episode": r.task.episode, "seed": r.task.seed, "metrics": r.metrics}
+                       for r in evaluation.records])
+    rows = ["| agent | case | day (seed) | why | reward | vehicles lost | contacts |",
+            "|---|---|---:|---|---:|---:|---:|"]
+    rows += [f"| {w.agent} | {case_label(w.config)} | {w.seed} | {w.reason} | "
+             f"{w.total_reward:.1f} | {w.vehicles_lost} | {w.contacts} |" for w in days]
+    return ("Each controller's first day with a vehicle lost or a contact in each case, else its "
+            "day of lowest reward:\n\n" + "\n".join(rows) + "\n\n"
+            "`python -m agents.render.worst_day OUT` (OUT: the folder of this run's "
+            "`results.json`) replays each of them and renders it around its first loss or "
+            "contact (else its two hours of lowest reward) with the decision log of every turn, "
+            "into `OUT/worst_day/`; `make evaluate` does it.")
+
+
 def report_markdown(evaluation: Evaluation, command: str, report_path: Path,
                     figures: dict[str, Path]) -> str:
     """The Markdown report: provenance, one table per case, the figures, generated findings."""
@@ -161,6 +180,7 @@ def report_markdown(evaluation: Evaluation, command: str, report_path: Path,
     changes = _case_change_findings(evaluation)
     if changes:
         parts += ["", "## From one case to the other", ""] + [f"- {c}" for c in changes]
+    parts += ["", "## Worst days", "", _worst_days_text(evaluation)]
     parts += ["", "## Metrics", "",
               METRIC_MEANINGS.format(steps=f"{steps['mean']:g}" if steps else "?").strip()]
     return "\n".join(parts) + "\n"

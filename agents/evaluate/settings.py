@@ -101,7 +101,7 @@ class EvalSettings:
         return {"agents": list(self.agents), "configs": list(self.configs),
                 "episodes": self.episodes, "seeds": list(self.seeds),
                 "seeds_rule": self.seeds_rule,
-                "overrides": {k: v for k, v in self.overrides},
+                "overrides": {k: v for k, v in self.overrides}, "rules": self.rules,
                 "bootstrap": {"resamples": self.bootstrap, "seed": self.bootstrap_seed,
                               "confidence": self.confidence, "method": "percentile"}}
 

@@ -18,7 +18,9 @@ or in Python::
 from __future__ import annotations
 
 import argparse
+import os
 import time
+from pathlib import Path
 from typing import Any
 
 from agents.interop import require
@@ -65,8 +67,12 @@ def main(argv: list[str] | None = None) -> int:
     seconds = time.perf_counter() - start
     print(f"{args.steps} steps in {seconds:.0f} s ({args.steps / seconds:.0f} steps/s)")
     if args.out:
-        model.save(args.out)
-        print(f"saved {args.out}")
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(f".{out.name}.tmp.zip")
+        model.save(tmp)  # then renamed: never a half-written model under the name asked for
+        os.replace(tmp, out)
+        print(f"saved {out}")
     return 0
 
 

@@ -5,13 +5,19 @@ Usage::
     python -m agents.render --agent heuristic --config paper --out runs/render/heuristic_paper.gif
     python -m agents.render --agent random --start-minute 360 --minutes 120 --every 2 --out x.gif
 
-The controller runs through the AEC env exactly as in evaluation (``run_aec_episode`` with the
+The controller runs through the AEC env exactly as in evaluation (``run_episode`` with the
 same seed gives the same episode); the day is fast-forwarded to ``--start-minute`` without
 rendering, then one frame is recorded after every ``--every``-th step for ``--minutes`` of the
 day. Each frame is pybullet's TinyRenderer view of the airspace (camera chosen so the whole
 airspace fits) with every eVTOL labelled by its index, and a side panel drawn with PIL: the
 time of day, the last ATC instruction and its outcome, one row per eVTOL (battery, status,
 schedule, events) and the running totals of the episode.
+
+The decision log (:mod:`agents.controllers.decisions`) of every turn from the day's start to
+the last frame is written beside the video (``<out>.decisions.csv`` and ``.json``), and a strip
+over the 3-D view shows each frame's decision: the recommendation and who made it, the learned
+policy's probabilities of the alternatives, and why the other actions are masked
+(``--no-decisions``: neither).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from pathlib import Path
 
 
 from agents.common.seeds import EVAL_SEEDS
+from agents.controllers.decisions import DecisionLog
 from agents.controllers.registry import AgentSpecError, agent_help, make_controller
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.physics import VEHICLE_COLOURS
@@ -33,7 +40,7 @@ from agents.render.camera import DEFAULT_PITCH_DEG, DEFAULT_YAW_DEG
 from agents.render.frames import FrameComposer
 from agents.render.style import rgb
 from agents.render.video import (
-    GifQuantiser, RenderError, _mp4_backend, record_episode, write_video,
+    GifQuantiser, RenderError, _mp4_backend, record_episode, run_cli, write_video,
 )
 
 
@@ -122,6 +129,11 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
                          "written atomically (default: runs/render/<agent>_<config>.gif)")
     ap.add_argument("--no-progress", action="store_true",
                     help="no progress bar on stderr while rendering")
+    ap.add_argument("--no-decisions", action="store_true",
+                    help="no decision strip on the frames and no decision log beside the video "
+                         "(by default <out>.decisions.csv and .json: every turn's "
+                         "recommendation, alternatives with probabilities, masked actions and "
+                         "why)")
     return ap
 
 
@@ -149,12 +161,7 @@ def _check_output(out: Path) -> None:
 
 
 def main(argv: list[str] | None = None, prog: str = PROG) -> int:
-    args = build_parser(prog).parse_args(argv)
-    try:
-        return _run(args)
-    except RenderError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return run_cli(build_parser(prog), _run, argv)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -191,14 +198,25 @@ def _run(args: argparse.Namespace) -> int:
 
         colours = [rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)]) for i in range(sim.n)]
         convert = GifQuantiser(colours) if out.suffix.lower() == ".gif" else None
+        log = None if args.no_decisions else DecisionLog(policy)
         t0 = time.perf_counter()
         frames = record_episode(env, policy, args.seed, factory, start_step, n_steps, args.every,
-                                progress=not args.no_progress, convert=convert)
+                                progress=not args.no_progress, convert=convert, log=log)
     finally:
         env.close()
     write_video(frames, out, args.fps, colours)
     size_mb = out.stat().st_size / 1e6
     print(f"wrote {out} ({len(frames)} frames, {width}x{height}, {size_mb:.1f} MB, "
           f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+    if log is not None:
+        paths = log.write(decision_log_stem(out), {
+            "agent": args.agent, "config": str(args.config), "seed": args.seed,
+            "video": out.name, "first_frame_step": start_step})
+        print(f"wrote {paths[0]} and {paths[1].name} ({len(log.rows)} turns)", file=sys.stderr)
     return 0
+
+
+def decision_log_stem(video: Path) -> Path:
+    """Where a video's decision log goes: ``x.gif`` -> ``x.decisions`` (``.csv``, ``.json``)."""
+    return video.with_name(video.stem + ".decisions")
 

@@ -10,7 +10,9 @@ from PIL import Image, ImageDraw
 
 from agents.render.camera import DEFAULT_PITCH_DEG, DEFAULT_YAW_DEG, fit_camera
 from agents.render.panel import StatusPanel
-from agents.render.style import BG, RED, SKY, font, ink_on, node_short, overlap, rgb
+from agents.render.style import (
+    AMBER, BG, BLUE, DIM, RED, SKY, TEXT, font, ink_on, node_short, overlap, rgb, short_action,
+)
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.layout import HOVER_SPOT
 from marl_vertiport.sim.schema import AWAY, OUT_OF_SERVICE
@@ -79,8 +81,12 @@ class FrameComposer:
         """The 3-D view alone (no overlay), ``(height, view_w, 3)``."""
         return self.camera.image(self.sim)
 
-    def compose(self, step_reward: float | None = None, view: np.ndarray | None = None) -> Image.Image:
-        """The full frame for the simulator's current state, as an RGB PIL image."""
+    def compose(self, step_reward: float | None = None, view: np.ndarray | None = None,
+                decision: dict | None = None) -> Image.Image:
+        """The full frame for the simulator's current state, as an RGB PIL image; with
+        ``decision`` (a row of :class:`agents.controllers.decisions.DecisionLog`), a strip over
+        the top of the 3-D view shows the recommendation, the alternatives' probabilities and
+        why the other actions are masked."""
         view = self.raw_view() if view is None else view
         frame = Image.new("RGB", (self.width, self.height), BG)
         view = np.array(view, copy=True)
@@ -92,8 +98,43 @@ class FrameComposer:
         self._acting = (int(str(info["acting_agent"]).rsplit("_", 1)[-1])
                         if "acting_agent" in info else -1)
         self._draw_scene_labels(draw)
+        if decision is not None:
+            self._draw_decision(draw, decision)
         self.panel.draw(draw, step_reward)
         return frame
+
+    # ------------------------------------------------------------------ decision strip
+    def decision_lines(self, row: dict) -> list[tuple[str, tuple[int, int, int]]]:
+        """The strip's lines for a decision-log row: the recommendation and who decided it,
+        the policy's probabilities (learned controllers), the masked actions' reasons (those
+        masked by their status left out: they are never an option)."""
+        who = row["agent"].replace("evtol_", "eVTOL ")
+        lines = [(f"{who} ({row['status'].replace('_', ' ')}, {row['battery_pct']:.0f} %) \u2192 "
+                  f"{short_action(row['recommendation_name'])}, by {row['decided_by']}", TEXT)]
+        if row["probabilities"]:
+            alts = " \u00b7 ".join(f"{short_action(a)} {p:.2f}" for a, p in
+                                    list(row["probabilities"].items())[:4])
+            lines.append((f"policy: {alts}", BLUE))
+        masked = [f"{short_action(a)} {r.replace('separation: ', 'sep. ')}"
+                  for a, r in row["masked"].items() if not r.startswith("status")]
+        if masked:
+            lines.append(("masked: " + " \u00b7 ".join(masked), AMBER))
+        if row["events"]:
+            bad = any(w in row["events"] for w in ("lost", "contact", "separation", "failed"))
+            lines.append(("then: " + row["events"], RED if bad else DIM))
+        return lines
+
+    def _draw_decision(self, d: ImageDraw.ImageDraw, row: dict) -> None:
+        pad = max(2, int(4 * self.s))
+        width = self.view_w - 2 * pad
+        lines = self.decision_lines(row)
+        h = len(lines) * self.small_h + 2 * pad
+        d.rectangle([0, 0, self.view_w, h], fill=BG)  # the panel's dark ground and inks
+        y = pad
+        for text, colour in lines:
+            d.text((pad, y), StatusPanel._fit(d, text, self.f_small, width), font=self.f_small,
+                   fill=colour)
+            y += self.small_h
 
     # ------------------------------------------------------------------ 3-D view
     def _draw_scene_labels(self, d: ImageDraw.ImageDraw) -> None:

@@ -95,6 +95,15 @@ def node_short(sim: VertiportSim, node: int) -> str:
     return f"H{node - lay.n_ports}"
 
 
+def short_action(name: str) -> str:
+    """An action's name as the decision strip shows it: ``normal_port_0`` -> ``P0``,
+    ``charging_port_1`` -> ``C1``, ``hover_spot_3`` -> ``H3``, the others as they are."""
+    for prefix, short in (("normal_port_", "P"), ("charging_port_", "C"), ("hover_spot_", "H")):
+        if name.startswith(prefix):
+            return short + name[len(prefix):]
+    return {"avoid_collision": "avoid"}.get(name, name)
+
+
 def node_long(sim: VertiportSim, node: int) -> str:
     kind = int(sim.layout.node_type[node])
     word = {CHARGING_PORT: "charger", HOVER_SPOT: "hover spot"}.get(kind, "port")

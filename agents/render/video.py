@@ -11,7 +11,8 @@ from typing import Any, Callable
 import numpy as np
 from PIL import Image
 
-from agents.controllers.episode import run_aec_episode
+from agents.controllers.decisions import DecisionLog
+from agents.controllers.episode import run_episode
 from marl_vertiport.sim.core import VertiportSim
 from agents.render.frames import FrameComposer
 from agents.render.style import ACT_BG, AMBER, BG, BLUE, DIM, GREEN, RED, ROW_BG, SKY, TEXT
@@ -22,6 +23,17 @@ class RenderError(Exception):
     """A user error the CLI reports in one line (exit status 2)."""
 
 
+def run_cli(parser: Any, run: Callable[[Any], int], argv: list[str] | None) -> int:
+    """Parse ``argv`` with ``parser`` and ``run`` the arguments; a :class:`RenderError` is
+    printed as one line and exits with status 2 (the render commands' main)."""
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except RenderError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
 
 # ====================================================================== recording
 class _Done(Exception):
@@ -30,8 +42,9 @@ class _Done(Exception):
 
 def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[[VertiportSim], FrameComposer],
                    start_step: int, n_steps: int, every: int, progress: bool = True,
-                   convert: Callable[[Image.Image], Any] | None = None) -> list[Any]:
-    """Run the episode with ``run_aec_episode`` (as evaluation does), fast-forward
+                   convert: Callable[[Image.Image], Any] | None = None,
+                   log: DecisionLog | None = None) -> list[Any]:
+    """Run the episode with ``run_episode`` (as evaluation does), fast-forward
     ``start_step`` steps without rendering, then compose a frame after every ``every``-th of
     the next ``n_steps`` steps; the episode stops after the last frame.
 
@@ -39,6 +52,8 @@ def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[
         composer_factory: builds the :class:`FrameComposer` from the simulator.
         convert: applied to each RGB frame as it is made (e.g. a :class:`GifQuantiser`, so
             long recordings keep 1 byte per pixel in memory).
+        log: a :class:`~agents.controllers.decisions.DecisionLog` of ``policy``: it logs every
+            turn from the day's start to the last frame, and each frame shows its decision.
 
     Returns:
         The frames, RGB PIL images (or what ``convert`` made of them).
@@ -49,6 +64,8 @@ def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[
     last = start_step + (n_frames - 1) * every
 
     def on_step(agent: str, action: int, env_: Any) -> None:
+        if log is not None:
+            log.after_step(agent, action, env_)
         sim = env_.unwrapped.sim
         k = sim.step_count - 1  # index of the step just taken
         if k < start_step or (k - start_step) % every:
@@ -61,7 +78,8 @@ def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[
                 state["bar"] = tqdm(total=n_frames, unit="frame", desc="rendering",
                                     file=sys.stderr, leave=True)
         reward = float(env_.rewards.get(agent, 0.0)) if hasattr(env_, "rewards") else None
-        frame = state["composer"].compose(step_reward=reward)
+        frame = state["composer"].compose(step_reward=reward,
+                                          decision=log.last if log is not None else None)
         frames.append(convert(frame) if convert is not None else frame)
         if state["bar"] is not None:
             state["bar"].update(1)
@@ -69,7 +87,8 @@ def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[
             raise _Done
 
     try:
-        run_aec_episode(env, policy, seed, on_step=on_step)
+        run_episode(env, policy, seed, after_step=on_step,
+                    before_step=log.before_step if log is not None else None)
     except _Done:
         pass
     finally:

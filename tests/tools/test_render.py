@@ -1,5 +1,6 @@
 """The episode renderer (agents/render/): CLI output, overlay, label placement, errors."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -52,8 +53,46 @@ def test_cli_writes_gif_with_expected_frames_and_size(tmp_path, capsys):
     assert im.info.get("duration") == 200
     assert all(np.asarray(f).std() > 10 for f in frames)  # not blank
     assert not any(frames[0].tobytes() == f.tobytes() for f in frames[1:])  # the clock moves
-    assert sorted(p.name for p in out.parent.iterdir()) == ["tiny.gif"]  # no temp file left
+    # The video and its decision log, no temp file left.
+    assert sorted(p.name for p in out.parent.iterdir()) == [
+        "tiny.decisions.csv", "tiny.decisions.json", "tiny.gif"]
     assert "wrote" in capsys.readouterr().err
+    log = json.loads((out.parent / "tiny.decisions.json").read_text())
+    assert log["meta"]["video"] == "tiny.gif" and len(log["rows"]) == 6
+
+
+def test_no_decisions_leaves_the_video_alone(tmp_path):
+    out = tmp_path / "plain.gif"
+    assert render.main(["--agent", "random", "--minutes", "2", "--size", "320x240",
+                        "--out", str(out), "--no-progress", "--no-decisions"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plain.gif"]
+
+
+def test_the_decision_strip_shows_recommendation_probabilities_and_masked_reasons(env):
+    from agents.controllers.decisions import DecisionLog
+    from agents.controllers.registry import make_controller
+
+    policy = make_controller("gcn")
+    log = DecisionLog(policy)
+    frames = render.record_episode(env, policy, 5, lambda s: render.FrameComposer(s, 640, 480),
+                                   start_step=0, n_steps=8, every=1, progress=False, log=log)
+    assert len(frames) == 8 and len(log.rows) == 8
+    composer = render.FrameComposer(env.unwrapped.sim, 640, 480)
+    row = next(r for r in log.rows if r["legal"] > 1)
+    lines = [text for text, _ in composer.decision_lines(row)]
+    assert lines[0].startswith(row["agent"].replace("evtol_", "eVTOL "))
+    assert "by gcn:" in lines[0]
+    assert lines[1].startswith("policy: ")  # the learned ATC's alternatives, most likely first
+    first_alt = next(iter(row["probabilities"]))
+    assert render.style.short_action(first_alt) in lines[1]
+    masked_line = next(t for t in lines if t.startswith("masked: "))
+    assert "status" not in masked_line  # never an option: left out of the strip
+    # The strip is drawn over the top of the 3-D view only.
+    plain = np.asarray(composer.compose())
+    with_strip = np.asarray(composer.compose(decision=row))
+    changed = np.flatnonzero((plain != with_strip).any(axis=(1, 2)))
+    assert changed.size and changed.max() < 100
+    assert not (plain[:, composer.view_w:] != with_strip[:, composer.view_w:]).any()
 
 
 def test_cli_every_and_start_minute(tmp_path):

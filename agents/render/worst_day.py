@@ -1,0 +1,201 @@
+"""The worst-day replay of an evaluation: for each controller and case of a run, the day an
+operator should watch first (:mod:`agents.evaluate.worst`: its first day with a vehicle lost or
+a contact, else its lowest reward), played again and rendered with its decision log.
+
+Usage::
+
+    python -m agents.render.worst_day runs/eval                  # every agent x case of the run
+    python -m agents.render.worst_day runs/eval --agents gcn --configs paper_uncertain
+
+For each pick the day is played twice from the run's settings (config, overrides, rules, seed):
+once whole, logging every turn (:class:`agents.controllers.decisions.DecisionLog`), which finds
+the window to show (``--before-min`` minutes before the first loss or contact to
+``--after-min`` after it; on a day without one, the ``--window-min`` minutes of lowest reward)
+and checks that the replay earns the reward the run recorded; then again, rendered over that
+window with each turn's decision on the frames. Writes into ``<run>/worst_day/``:
+``<agent>_<config>.gif``, ``<agent>_<config>.decisions.csv`` and ``.json`` (the whole day's
+log) and ``index.md``, a table of the picks, why, the event's minute, the window and whether
+the replay matched.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.common.files import write_atomic
+from agents.controllers.decisions import DecisionLog
+from agents.controllers.episode import run_episode
+from agents.controllers.registry import make_controller
+from agents.evaluate.worst import WorstDay, worst_days
+from agents.render.frames import FrameComposer
+from agents.render.style import rgb
+from agents.render.cli import parse_size
+from agents.render.video import GifQuantiser, RenderError, record_episode, run_cli, write_video
+from marl_vertiport.config import LATEST_RULES
+from marl_vertiport.sim.physics import VEHICLE_COLOURS
+
+PROG = "python -m agents.render.worst_day"
+#: The events of a decision-log row that make a day's "first loss or contact".
+LOSS_EVENTS = ("vehicle lost", "contact")
+
+
+def _env(config: str, overrides: dict[str, Any], rules: int, render_mode: str | None = None):
+    import importlib
+
+    module = importlib.import_module(f"marl_vertiport.vertiport_v{rules}")
+    return module.env(config=config, render_mode=render_mode, **overrides)
+
+
+def event_step(rows: list[dict[str, Any]]) -> int | None:
+    """The step of the first row whose events include a vehicle lost or a contact."""
+    for row in rows:
+        if any(e in row["events"] for e in LOSS_EVENTS):
+            return int(row["step"])
+    return None
+
+
+def lowest_reward_window(rows: list[dict[str, Any]], steps: int) -> int:
+    """The first step of the ``steps`` consecutive turns of lowest summed reward."""
+    rewards = np.array([r["reward"] for r in rows], dtype=float)
+    if len(rewards) <= steps:
+        return 0
+    sums = np.convolve(rewards, np.ones(steps), mode="valid")
+    return int(np.argmin(sums))
+
+
+def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
+           before_min: float, after_min: float, window_min: float, size: tuple[int, int],
+           progress: bool) -> dict[str, Any]:
+    """Play ``pick``'s day whole with its log, then render its window; the index's row."""
+    policy = make_controller(pick.agent)
+    env = _env(pick.config, overrides, rules)
+    log = DecisionLog(policy)
+    try:
+        metrics = run_episode(env, policy, pick.seed, before_step=log.before_step,
+                              after_step=log.after_step)
+        mps = env.unwrapped.sim.minutes_per_step
+        total_steps = env.unwrapped.sim.cfg.schedule.episode_steps
+    finally:
+        env.close()
+    matched = math.isclose(metrics["total_reward"], pick.total_reward, rel_tol=1e-9, abs_tol=1e-6)
+    event = event_step(log.rows)
+    if event is not None:
+        start = max(0, event - int(round(before_min / mps)))
+        n_steps = min(total_steps, event + int(round(after_min / mps)) + 1) - start
+    else:
+        n_steps = max(1, int(round(window_min / mps)))
+        start = lowest_reward_window(log.rows, n_steps)
+    stem = f"{pick.agent}_{pick.config}".replace(":", "_").replace("/", "_").replace(".", "_")
+    video = out / f"{stem}.gif"
+    log.write(out / f"{stem}.decisions", {
+        "agent": pick.agent, "config": pick.config, "seed": pick.seed, "reason": pick.reason,
+        "overrides": overrides, "rules": rules, "video": video.name,
+        "first_frame_step": start, "event_step": event})
+    env = _env(pick.config, overrides, rules, render_mode="rgb_array")
+    try:
+        colours = [rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)])
+                   for i in range(env.unwrapped.sim.n)]
+        player = make_controller(pick.agent)  # a fresh controller: the day played again
+        frames = record_episode(
+            env, player, pick.seed, lambda s: FrameComposer(s, size[0], size[1]), start,
+            n_steps, 1, progress=progress, convert=GifQuantiser(colours),
+            log=DecisionLog(player))
+    finally:
+        env.close()
+    write_video(frames, video, 8.0, colours)
+    return {"pick": pick, "event_minute": None if event is None else event * mps,
+            "window": (start * mps, (start + n_steps) * mps), "matched": matched,
+            "replayed_reward": metrics["total_reward"], "video": video.name,
+            "log": f"{stem}.decisions.csv"}
+
+
+def index_markdown(run: Path, rows: list[dict[str, Any]]) -> str:
+    lines = ["# Worst days", "",
+             f"Replayed from `{run / 'results.json'}` by `{PROG}`: per controller and case, its "
+             "first day with a vehicle lost or a contact, else its day of lowest reward "
+             "(agents/evaluate/worst.py), rendered around the first loss or contact (else its "
+             "window of lowest reward) with each turn's decision on the frames; the day's "
+             "decision log beside each video (`.decisions.csv`, `.json`).", "",
+             "| agent | config | day (seed) | why | event at minute | window (minutes) | reward | "
+             "lost | contacts | replay matches the run | video | decision log |",
+             "|---|---|---:|---|---:|---|---:|---:|---:|---|---|---|"]
+    for r in rows:
+        p = r["pick"]
+        event = "" if r["event_minute"] is None else f"{r['event_minute']:g}"
+        lines.append(f"| {p.agent} | {p.config} | {p.seed} | {p.reason} | {event} | "
+                     f"{r['window'][0]:g}-{r['window'][1]:g} | {p.total_reward:.1f} | "
+                     f"{p.vehicles_lost} | {p.contacts} | "
+                     f"{'yes' if r['matched'] else 'NO: ' + format(r['replayed_reward'], '.1f')} | "
+                     f"[{r['video']}]({r['video']}) | [{r['log']}]({r['log']}) |")
+    return "\n".join(lines) + "\n"
+
+
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog=prog, description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("run", type=Path, help="an evaluation's output folder (with results.json)")
+    ap.add_argument("--agents", nargs="+", default=None, help="only these agents of the run")
+    ap.add_argument("--configs", nargs="+", default=None, help="only these configs of the run")
+    ap.add_argument("--before-min", type=float, default=90.0,
+                    help="minutes shown before the first loss or contact (default: %(default)g)")
+    ap.add_argument("--after-min", type=float, default=30.0,
+                    help="minutes shown after it (default: %(default)g)")
+    ap.add_argument("--window-min", type=float, default=120.0,
+                    help="minutes shown of a day without a loss or contact (default: %(default)g)")
+    ap.add_argument("--size", type=parse_size, default="640x480",
+                    help="frame size WxH (default: %(default)s)")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="output folder (default: <run>/worst_day)")
+    ap.add_argument("--no-progress", action="store_true")
+    return ap
+
+
+def main(argv: list[str] | None = None, prog: str = PROG) -> int:
+    return run_cli(build_parser(prog), _run, argv)
+
+
+def _run(args: argparse.Namespace) -> int:
+    path = args.run / "results.json"
+    try:
+        doc = json.loads(path.read_text())
+        settings, episodes = doc["settings"], doc["episodes"]
+    except FileNotFoundError:
+        raise RenderError(f"{path} not found: give an evaluation's output folder") from None
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise RenderError(f"{path} is not an evaluation's results.json ({exc})") from None
+    size = args.size
+    picks = [w for w in worst_days(episodes)
+             if (args.agents is None or w.agent in args.agents)
+             and (args.configs is None or w.config in args.configs)]
+    if not picks:
+        raise RenderError(f"no day of {path} matches --agents {args.agents} --configs {args.configs}")
+    out = args.out or args.run / "worst_day"
+    overrides = dict(settings.get("overrides") or {})
+    rules = int(settings.get("rules", LATEST_RULES))
+    rows = []
+    for k, pick in enumerate(picks, 1):
+        print(f"[{k}/{len(picks)}] {pick.agent} on {pick.config}, day {pick.seed} "
+              f"({pick.reason}) ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        row = replay(pick, overrides, rules, out, before_min=args.before_min,
+                     after_min=args.after_min, window_min=args.window_min, size=size,
+                     progress=not args.no_progress)
+        note = "" if row["matched"] else " (the replay's reward differs from the run's: another code or machine)"
+        print(f"    wrote {out / row['video']} and its decision log, {time.perf_counter() - t0:.0f} s{note}",
+              file=sys.stderr)
+        rows.append(row)
+    write_atomic(out / "index.md", index_markdown(args.run, rows))
+    print(f"wrote {out / 'index.md'}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
