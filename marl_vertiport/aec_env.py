@@ -19,7 +19,7 @@ from pettingzoo.utils.wrappers.order_enforcing import (
 
 from marl_vertiport.config import LATEST_RULES, EnvConfig
 from marl_vertiport.render import render_frame
-from marl_vertiport.world import make_world
+from marl_vertiport.world import agent_names, attach_world
 
 __all__ = ["OrderEnforcing", "VertiportAEC", "reset_agent_dicts"]
 
@@ -101,12 +101,8 @@ class VertiportAEC(AECEnv):
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
         super().__init__()
-        world = make_world(config, render_mode, self.metadata["render_modes"],
-                           type(self).__name__, self.RULES, **overrides)
-        self.config, self.sim, self._builder = world.config, world.sim, world.builder
-        self.render_mode = render_mode
-        self.possible_agents = [f"evtol_{i}" for i in range(self.sim.n)]
-        self.agent_name_mapping = {a: i for i, a in enumerate(self.possible_agents)}
+        attach_world(self, config, render_mode, overrides)
+        self.possible_agents, self.agent_name_mapping = agent_names(self.sim.n)
         self.observation_spaces = dict.fromkeys(self.possible_agents, self._builder.observation_space)
         self.action_spaces = dict.fromkeys(self.possible_agents, self._builder.action_space)
         self.state_space = self._builder.state_space

@@ -43,7 +43,7 @@ import numpy as np
 from marl_vertiport.config import LATEST_RULES, EnvConfig
 from marl_vertiport.render import render_frame
 from marl_vertiport.spaces import LegalDiscrete
-from marl_vertiport.world import make_world
+from marl_vertiport.world import attach_world
 
 
 class VertiportEnv(gym.Env):
@@ -55,10 +55,7 @@ class VertiportEnv(gym.Env):
 
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        world = make_world(config, render_mode, self.metadata["render_modes"],
-                           type(self).__name__, self.RULES, **overrides)
-        self.config, self.sim, self._builder = world.config, world.sim, world.builder
-        self.render_mode = render_mode
+        attach_world(self, config, render_mode, overrides)
         self._started = False
         self.observation_space = self._builder.observation_space
         # sample() draws among the legal actions of the acting eVTOL (see LegalDiscrete).

@@ -31,11 +31,12 @@ import numpy as np
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from marl_vertiport.aec_env import VertiportAEC
 from marl_vertiport.config import LATEST_RULES, EnvConfig
 from marl_vertiport.render import render_frame
 from marl_vertiport.sim.core import IllegalActionError
 from marl_vertiport.spaces import LegalDiscrete
-from marl_vertiport.world import make_world
+from marl_vertiport.world import agent_names, attach_world
 
 __all__ = ["VertiportParallel"]
 
@@ -51,21 +52,12 @@ class VertiportParallel(ParallelEnv):
 
     #: The rules version (marl_vertiport/config/rules.py).
     RULES = LATEST_RULES
-    metadata = {
-        "render_modes": ["human", "rgb_array"],
-        "name": f"vertiport_v{LATEST_RULES}",
-        "is_parallelizable": True,
-        "render_fps": 8,
-    }
+    metadata = dict(VertiportAEC.metadata, is_parallelizable=True)
 
     def __init__(self, config: str | EnvConfig | dict | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        world = make_world(config, render_mode, self.metadata["render_modes"],
-                           type(self).__name__, self.RULES, **overrides)
-        self.config, self.sim, self._builder = world.config, world.sim, world.builder
-        self.render_mode = render_mode
-        self.possible_agents = [f"evtol_{i}" for i in range(self.sim.n)]
-        self.agent_name_mapping = {a: i for i, a in enumerate(self.possible_agents)}
+        attach_world(self, config, render_mode, overrides)
+        self.possible_agents, self.agent_name_mapping = agent_names(self.sim.n)
         #: The one legal action of an agent whose turn it is not: ``continue`` (index 2 + P).
         self.noop_action = int(self.sim.actions.continue_)
         noop = np.zeros(self.sim.actions.n, dtype=np.int8)

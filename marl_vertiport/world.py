@@ -51,3 +51,22 @@ def make_world(config: str | EnvConfig | dict | None, render_mode: str | None,
     if sim.physics.gui:
         draw_scenery(sim)
     return World(cfg, sim, builder)
+
+
+def attach_world(env: Any, config: str | EnvConfig | dict | None, render_mode: str | None,
+                 overrides: dict[str, Any]) -> World:
+    """Build ``env``'s world (:func:`make_world` with the render modes of its ``metadata``, its
+    class name and its ``RULES``) and set ``env.config``, ``env.sim``, ``env._builder`` and
+    ``env.render_mode``: what every env of the package does first."""
+    world = make_world(config, render_mode, env.metadata["render_modes"], type(env).__name__,
+                       env.RULES, **overrides)
+    env.config, env.sim, env._builder = world.config, world.sim, world.builder
+    env.render_mode = render_mode
+    return world
+
+
+def agent_names(n: int) -> tuple[list[str], dict[str, int]]:
+    """The multi-agent envs' agents, ``evtol_0 .. evtol_{n-1}``, and each one's vehicle index."""
+    names = [f"evtol_{i}" for i in range(n)]
+    return names, {a: i for i, a in enumerate(names)}
+
