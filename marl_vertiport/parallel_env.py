@@ -130,14 +130,12 @@ class VertiportParallel(ParallelEnv):
                                f"{', '.join(self.possible_agents)}")
             if action is None:
                 continue
-            is_int = isinstance(action, (int, np.integer)) or (
-                isinstance(action, np.ndarray) and action.shape == ()
-                and np.issubdtype(action.dtype, np.integer))
-            if isinstance(action, (bool, np.bool_)) or not is_int or int(action) != self.noop_action:
+            try:
+                self.sim.check_action(self.agent_name_mapping[agent], action, self._noop_mask)
+            except IllegalActionError as exc:
                 raise IllegalActionError(
-                    f"{agent}: action {action!r} is not legal: it is the turn of {acting}, and "
-                    f"an agent whose turn it is not may only wait (action {self.noop_action}, "
-                    f"continue)")
+                    f"{exc}: it is the turn of {acting}, and an agent whose turn it is not may "
+                    f"only wait") from None
         if acting not in actions or actions[acting] is None:
             raise KeyError(f"no action for {acting}, whose turn it is (env.acting_agent)")
         return actions[acting]

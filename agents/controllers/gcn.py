@@ -147,11 +147,7 @@ class GCNController(Controller):
         masked ones (the decision log's alternatives; greedy play takes the largest)."""
         if self._fast is not None:
             self.check_columns(observation)
-            logits = self._fast.logits(observation).astype(np.float64)
-            mask = np.asarray(observation["action_mask"]).astype(bool)
-            z = np.where(mask, logits, -np.inf)
-            e = np.exp(z - z[mask].max())
-            return e / e.sum()
+            return masked_softmax(self._fast.logits(observation), observation["action_mask"])
         with torch.no_grad():
             return self.actor.action_probabilities(self.checked_tensors(observation))[0].numpy()
 
@@ -200,6 +196,15 @@ class FastGCNController(Controller):
         return self.actor.act(observation)
 
 
+def masked_softmax(scores: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``(A,)`` float64 probabilities of one observation's actions from their ``scores``
+    (logits or log-probabilities), 0 where ``mask`` is 0."""
+    legal = np.asarray(mask).astype(bool)
+    z = np.where(legal, np.asarray(scores, dtype=np.float64), -np.inf)
+    e = np.exp(z - z[legal].max())
+    return e / e.sum()
+
+
 def mean_log_probabilities(actors: list, obs: TensorDict) -> torch.Tensor:
     """``(B, A)`` the members' masked log-probabilities on a batch, averaged over ``actors``
     (an ensemble's policy, up to normalisation); very negative on illegal actions."""
@@ -235,11 +240,8 @@ class GCNEnsemble(Controller):
         """The ensemble's policy ``(A,)``: the members' mean log-probabilities, normalised
         over the legal actions (0 on masked ones)."""
         obs = self.members[0].checked_tensors(observation)
-        logp = mean_log_probabilities([m.actor for m in self.members], obs)[0].double().numpy()
-        mask = np.asarray(observation["action_mask"]).astype(bool)
-        z = np.where(mask, logp, -np.inf)
-        e = np.exp(z - z[mask].max())
-        return e / e.sum()
+        logp = mean_log_probabilities([m.actor for m in self.members], obs)[0].numpy()
+        return masked_softmax(logp, observation["action_mask"])
 
     def act(self, observation: dict) -> int:
         # Every member reads this version's feature schema (GCNController refuses others), so

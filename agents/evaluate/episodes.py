@@ -24,15 +24,21 @@ from marl_vertiport.config import LATEST_RULES
 _ENV_CACHE: dict[tuple[str, str, int], Any] = {}
 
 
-def cached_env(config: str, overrides: Overrides, rules: int = LATEST_RULES) -> Any:
-    """The AEC env (``vertiport_v{rules}``) of a case, built once per process (each holds its
-    own pybullet client)."""
+def versioned_env(config: str, overrides: Overrides | dict[str, Any], rules: int = LATEST_RULES,
+                  render_mode: str | None = None) -> Any:
+    """A new AEC env of a case under the rules of version ``rules`` (``vertiport_v{rules}``)."""
     import importlib
 
+    module = importlib.import_module(f"marl_vertiport.vertiport_v{rules}")
+    return module.env(config=config, render_mode=render_mode, **dict(overrides))
+
+
+def cached_env(config: str, overrides: Overrides, rules: int = LATEST_RULES) -> Any:
+    """The AEC env (:func:`versioned_env`) of a case, built once per process (each holds its
+    own pybullet client)."""
     key = (config, repr(overrides), rules)
     if key not in _ENV_CACHE:
-        module = importlib.import_module(f"marl_vertiport.vertiport_v{rules}")
-        _ENV_CACHE[key] = module.env(config=config, **dict(overrides))
+        _ENV_CACHE[key] = versioned_env(config, overrides, rules)
     return _ENV_CACHE[key]
 
 

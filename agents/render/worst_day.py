@@ -34,6 +34,7 @@ from agents.common.files import write_atomic
 from agents.controllers.decisions import DecisionLog
 from agents.controllers.episode import run_episode
 from agents.controllers.registry import make_controller
+from agents.evaluate.episodes import versioned_env
 from agents.evaluate.worst import WorstDay, worst_days
 from agents.render.frames import FrameComposer
 from agents.render.style import rgb
@@ -45,13 +46,6 @@ from marl_vertiport.sim.physics import VEHICLE_COLOURS
 PROG = "python -m agents.render.worst_day"
 #: The events of a decision-log row that make a day's "first loss or contact".
 LOSS_EVENTS = ("vehicle lost", "contact")
-
-
-def _env(config: str, overrides: dict[str, Any], rules: int, render_mode: str | None = None):
-    import importlib
-
-    module = importlib.import_module(f"marl_vertiport.vertiport_v{rules}")
-    return module.env(config=config, render_mode=render_mode, **overrides)
 
 
 def event_step(rows: list[dict[str, Any]]) -> int | None:
@@ -76,7 +70,7 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
            progress: bool) -> dict[str, Any]:
     """Play ``pick``'s day whole with its log, then render its window; the index's row."""
     policy = make_controller(pick.agent)
-    env = _env(pick.config, overrides, rules)
+    env = versioned_env(pick.config, overrides, rules)
     log = DecisionLog(policy)
     try:
         metrics = run_episode(env, policy, pick.seed, before_step=log.before_step,
@@ -99,7 +93,7 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
         "agent": pick.agent, "config": pick.config, "seed": pick.seed, "reason": pick.reason,
         "overrides": overrides, "rules": rules, "video": video.name,
         "first_frame_step": start, "event_step": event})
-    env = _env(pick.config, overrides, rules, render_mode="rgb_array")
+    env = versioned_env(pick.config, overrides, rules, render_mode="rgb_array")
     try:
         colours = [rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)])
                    for i in range(env.unwrapped.sim.n)]

@@ -133,9 +133,12 @@ class Legality:
         legal = np.flatnonzero(self.action_mask(v))
         return int(legal[0]) if legal.size == 1 else None
 
-    def check_action(self, v: int, action: Any) -> int:
-        """Return ``action`` as an int if it is legal for vehicle ``v``, else raise."""
-        mask = self.action_mask(v)
+    def check_action(self, v: int, action: Any, mask: np.ndarray | None = None) -> int:
+        """Return ``action`` as an int if it is legal for vehicle ``v``, else raise; ``mask``
+        replaces the vehicle's own mask as the legal set (the Parallel env's no-op of an agent
+        whose turn it is not)."""
+        if mask is None:
+            mask = self.action_mask(v)
         if (type(action) is int or isinstance(action, np.integer)) and 0 <= action < len(mask) \
                 and mask[action]:
             return int(action)
