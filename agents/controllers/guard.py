@@ -8,8 +8,9 @@ action) it simulates the base's choice, then the base (or ``fleet``) for the who
 uncertainties (wind gusts, charger and take-off failures) from generators of its own:
 
 * if no rollout loses a vehicle (``sim.lost``), the base's choice stands;
-* if one does, every legal action of the acting vehicle is simulated the same way, with the
-  same draws for every action (common random numbers). If the base's choice loses at least
+* if one does, every legal action of the acting vehicle is simulated the same way
+  (``compare_samples`` times each, ``samples`` by default; the first ``samples`` of them draw
+  what the check drew), with the same draws for every action (common random numbers). If the base's choice loses at least
   ``min_lost`` vehicles on average over its rollouts (half a vehicle by default: a loss in at
   least half of them), the action with the fewest vehicles lost on average is taken: the
   base's choice where it ties for the fewest, else the one whose rollouts earn the most
@@ -79,6 +80,10 @@ class GuardedController(ScratchRollouts, Controller):
         horizon_min: minutes simulated per rollout, the decision's own step included.
         samples: rollouts per action; each draws the uncertainties from its own generator (one
             where the config has none).
+        compare_samples: rollouts per action where the base's choice lost a vehicle and every
+            legal action is compared (at least ``samples``; default ``None``: ``samples``). The
+            comparison is rare and decides a changed decision: more draws there sample the bad
+            gusts and failures that a few rollouts miss, at little cost to the day.
         nominal: roll out without the config's uncertainties (and so once per action).
         quiet_pct: a clean check in which every live vehicle keeps at least this charge (%)
             skips the checks of the next ``quiet_min`` minutes (above 100: never skip).
@@ -112,7 +117,7 @@ class GuardedController(ScratchRollouts, Controller):
     name = "guard"
 
     def __init__(self, base: str | Any = "heuristic", horizon_min: float = 120.0,
-                 samples: int = 4, nominal: bool = False, quiet_pct: float = 20.0,
+                 samples: int = 4, compare_samples: int | None = None, nominal: bool = False, quiet_pct: float = 20.0,
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
                  clairvoyant: bool = False, prefer: str = "reward",
                  fleet: str | Any | None = None, defer_pct: float = 0.0,
@@ -121,6 +126,8 @@ class GuardedController(ScratchRollouts, Controller):
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
+        if compare_samples is not None and compare_samples < samples:
+            raise ValueError(f"compare_samples must be >= samples ({samples}), got {compare_samples}")
         if quiet_min < 0:
             raise ValueError(f"quiet_min must be >= 0 minutes, got {quiet_min}")
         if min_lost <= 0:
@@ -153,6 +160,7 @@ class GuardedController(ScratchRollouts, Controller):
         self.fleet = fleet
         self.horizon_min = float(horizon_min)
         self.samples = int(samples)
+        self.compare_samples = self.samples if compare_samples is None else int(compare_samples)
         self.nominal = bool(nominal)
         self.quiet_pct = float(quiet_pct)
         self.quiet_min = float(quiet_min)
@@ -168,6 +176,7 @@ class GuardedController(ScratchRollouts, Controller):
                        if self_check else None)
         self._episode_seed = 0
         self._runs = self.samples
+        self._compare_runs = self.compare_samples
         self._quiet_until_step = -1
         #: Per action of the last decision that ran the full comparison: (mean vehicles lost,
         #: mean reward, mean least charge %) over its rollouts; empty where the base's choice
@@ -214,7 +223,9 @@ class GuardedController(ScratchRollouts, Controller):
             self.onward.sim = self._scratch
         cfg = self._scratch.cfg
         # Without uncertainties every rollout of an action is the same: one is enough.
-        self._runs = 1 if self.clairvoyant or cfg == nominal_config(cfg) else self.samples
+        alike = self.clairvoyant or cfg == nominal_config(cfg)
+        self._runs = 1 if alike else self.samples
+        self._compare_runs = 1 if alike else self.compare_samples
 
     def close(self) -> None:
         super().close()
@@ -228,14 +239,16 @@ class GuardedController(ScratchRollouts, Controller):
         return max(1, int(round(self.horizon_min / sim.cfg.schedule.minutes_per_step)))
 
     def evaluate(self, sim: VertiportSim, actions: list[int],
-                 stop_at_loss: bool = False, policy: Any = None
+                 stop_at_loss: bool = False, policy: Any = None, runs: int | None = None
                  ) -> tuple[dict[int, tuple[float, float, float]], float]:
         """Per action, the mean over its rollouts of the vehicles lost (beyond those already
         lost), of the reward and of the least charge (%) of a live vehicle in the rollout; and
         the least charge (%) of a live vehicle seen in any rollout step. ``stop_at_loss``: stop
         an action's rollouts at the first that loses a vehicle (its means are then over the
-        rollouts run). ``policy`` flies the rollouts (default: :attr:`rollout_policy`)."""
+        rollouts run). ``policy`` flies the rollouts (default: :attr:`rollout_policy`);
+        ``runs`` rollouts per action (default: ``samples``, one where they are all alike)."""
         policy = self.rollout_policy if policy is None else policy
+        runs_per_action = self._runs if runs is None else int(runs)
         scratch, builder = self._scratch, self._builder
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
@@ -253,7 +266,7 @@ class GuardedController(ScratchRollouts, Controller):
         for a in actions:
             lost = reward = margin = 0.0
             runs = 0
-            for k in range(self._runs):
+            for k in range(runs_per_action):
                 rng = None if self.clairvoyant else np.random.default_rng(
                     (self.seed, self._episode_seed, sim.step_count, k))
                 run_least[0] = 100.0
@@ -336,7 +349,8 @@ class GuardedController(ScratchRollouts, Controller):
                 self._quiet_until_step = sim.step_count + int(
                     round(self.quiet_min / sim.cfg.schedule.minutes_per_step))
             return choice
-        values, _ = self.evaluate(sim, legal if choice in legal else [*legal, choice])
+        values, _ = self.evaluate(sim, legal if choice in legal else [*legal, choice],
+                                  runs=self._compare_runs)
         self.last_values = values
         fewest = min(v[0] for v in values.values())
         if values[choice][0] <= fewest or values[choice][0] < self.min_lost:

@@ -223,6 +223,39 @@ def test_arguments_and_unbound_use():
         guard.close()
         env.close()
     assert make_controller("guard[samples=2]").samples == 2
+
+
+def test_compare_samples_draws_more_rollouts_only_where_every_action_is_compared():
+    """``compare_samples`` sets the rollouts per action of the full comparison (at least
+    ``samples``; ``samples`` by default, one where all rollouts are alike); the comparison's
+    first ``samples`` rollouts draw what the check drew, so its values over those are the
+    check's."""
+    with pytest.raises(ValueError, match="compare_samples"):
+        GuardedController(samples=4, compare_samples=3)
+    assert GuardedController(samples=3).compare_samples == 3
+    assert make_controller("handback[compare_samples=16]").compare_samples == 16
+    for config, runs in (("paper", (1, 1)), ("paper_uncertain", (4, 6))):
+        env = vertiport_v1.env(config=config)
+        guard = GuardedController(samples=4, compare_samples=6)
+        guard.bind(env.unwrapped.sim)
+        assert (guard._runs, guard._compare_runs) == runs
+        guard.close()
+        env.close()
+    env = vertiport_v1.env(config="paper_uncertain_10")
+    sim = env.unwrapped.sim
+    _, obs, legal = _dispatcher_day_to_a_choice(env, 2)
+    guard = GuardedController(samples=2, compare_samples=5)
+    guard.reset(seed=0)
+    guard.bind(sim)
+    action = legal[0]
+    few, _ = guard.evaluate(sim, [action])
+    many, _ = guard.evaluate(sim, [action], runs=5)
+    per_run = [guard.evaluate(sim, [action], runs=k)[0][action][1] * k for k in (1, 2, 5)]
+    assert few[action][1] == pytest.approx(per_run[1] / 2)  # the check's 2 draws come first
+    assert many[action][1] == pytest.approx(per_run[2] / 5)
+    assert per_run[2] != pytest.approx(5 * per_run[0])  # the later draws differ
+    guard.close()
+    env.close()
     assert isinstance(make_controller("guard[base=fcfs]").base, make_controller("fcfs").__class__)
 
 
@@ -241,9 +274,18 @@ def test_of_the_actions_that_lose_fewest_the_guard_takes_the_preferred(prefer, w
     assert len(others) == 2
     crafted = {choice: (1.0, 90.0, 30.0), others[0]: (0.0, 50.0, 10.0),
                others[1]: (0.0, 20.0, 60.0)}
-    guard.evaluate = lambda sim, actions, stop_at_loss=False: (
-        {a: crafted.get(a, (2.0, 0.0, 0.0)) for a in actions}, 0.0)
+    runs = []
+
+    def evaluate(sim, actions, stop_at_loss=False, runs_per_action=None):
+        runs.append(runs_per_action)
+        return {a: crafted.get(a, (2.0, 0.0, 0.0)) for a in actions}, 0.0
+
+    guard.evaluate = lambda sim, actions, stop_at_loss=False, runs=None: evaluate(
+        sim, actions, stop_at_loss, runs)
     assert guard.act(obs) == others[wanted] and guard.changes == 1
+    # The check runs `samples` rollouts (the default); the comparison `compare_samples` (here
+    # one: the config is nominal, so every rollout of an action is alike).
+    assert runs == [None, 1]
     guard.close()
     env.close()
 
@@ -374,7 +416,7 @@ def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands)
     least = {other: 10.0, own: 40.0}
     checked = []
 
-    def crafted(sim, actions, stop_at_loss=False):
+    def crafted(sim, actions, stop_at_loss=False, runs=None):
         checked.extend(actions)
         return {a: (0.0, 0.0, least[a]) for a in actions}, min(least[a] for a in actions)
 
@@ -410,7 +452,7 @@ def test_self_check_hands_a_choice_the_base_itself_would_lose_to_the_fleet():
         guard.bind(sim)
         checked = []
 
-        def crafted(sim, actions, stop_at_loss=False, policy=None):
+        def crafted(sim, actions, stop_at_loss=False, policy=None, runs=None):
             onward = policy is guard.onward
             checked.append((actions[0], onward))
             lost = 1.0 if onward and onward_loses else 0.0
