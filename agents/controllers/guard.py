@@ -10,11 +10,11 @@ uncertainties (wind gusts, charger and take-off failures) from generators of its
 * if no rollout loses a vehicle (``sim.lost``), the base's choice stands;
 * if one does, every legal action of the acting vehicle is simulated the same way
   (``compare_samples`` times each, ``samples`` by default; the first ``samples`` of them draw
-  what the check drew), with the same draws for every action (common random numbers). If the base's choice loses at least
-  ``min_lost`` vehicles on average over its rollouts (half a vehicle by default: a loss in at
-  least half of them), the action with the fewest vehicles lost on average is taken: the
-  base's choice where it ties for the fewest, else the one whose rollouts earn the most
-  reward (with ``prefer="margin"``: keep the most charge).
+  what the check drew), with the same draws for every action (common random numbers). If the
+  base's choice loses at least ``min_lost`` vehicles on average over its rollouts (half a
+  vehicle by default: a loss in at least half of them), the action with the fewest vehicles
+  lost on average is taken: the base's choice where it ties for the fewest, else the one whose
+  rollouts earn the most reward (with ``prefer="margin"``: keep the most charge).
 
 A check that loses no vehicle and in which no live vehicle's charge falls below ``quiet_pct``
 lets the guard skip the checks of the next ``quiet_min`` minutes: most of a day is far from a
@@ -81,9 +81,8 @@ class GuardedController(ScratchRollouts, Controller):
         samples: rollouts per action; each draws the uncertainties from its own generator (one
             where the config has none).
         compare_samples: rollouts per action where the base's choice lost a vehicle and every
-            legal action is compared (at least ``samples``; default ``None``: ``samples``). The
-            comparison is rare and decides a changed decision: more draws there sample the bad
-            gusts and failures that a few rollouts miss, at little cost to the day.
+            legal action is compared (at least ``samples``; default ``None``: ``samples``),
+            the one comparison that decides a changed decision.
         nominal: roll out without the config's uncertainties (and so once per action).
         quiet_pct: a clean check in which every live vehicle keeps at least this charge (%)
             skips the checks of the next ``quiet_min`` minutes (above 100: never skip).
@@ -117,7 +116,8 @@ class GuardedController(ScratchRollouts, Controller):
     name = "guard"
 
     def __init__(self, base: str | Any = "heuristic", horizon_min: float = 120.0,
-                 samples: int = 4, compare_samples: int | None = None, nominal: bool = False, quiet_pct: float = 20.0,
+                 samples: int = 4, compare_samples: int | None = None, nominal: bool = False,
+                 quiet_pct: float = 20.0,
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
                  clairvoyant: bool = False, prefer: str = "reward",
                  fleet: str | Any | None = None, defer_pct: float = 0.0,
@@ -127,7 +127,8 @@ class GuardedController(ScratchRollouts, Controller):
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
         if compare_samples is not None and compare_samples < samples:
-            raise ValueError(f"compare_samples must be >= samples ({samples}), got {compare_samples}")
+            raise ValueError(f"compare_samples must be >= samples ({samples}), "
+                             f"got {compare_samples}")
         if quiet_min < 0:
             raise ValueError(f"quiet_min must be >= 0 minutes, got {quiet_min}")
         if min_lost <= 0:
@@ -265,7 +266,7 @@ class GuardedController(ScratchRollouts, Controller):
         values: dict[int, tuple[float, float, float]] = {}
         for a in actions:
             lost = reward = margin = 0.0
-            runs = 0
+            played = 0
             for k in range(runs_per_action):
                 rng = None if self.clairvoyant else np.random.default_rng(
                     (self.seed, self._episode_seed, sim.step_count, k))
@@ -274,10 +275,10 @@ class GuardedController(ScratchRollouts, Controller):
                 lost += int(np.count_nonzero(scratch.lost)) - lost_before
                 margin += run_least[0]
                 least = min(least, run_least[0])
-                runs += 1
+                played += 1
                 if stop_at_loss and lost > 0:
                     break
-            values[a] = (lost / runs, reward / runs, margin / runs)
+            values[a] = (lost / played, reward / played, margin / played)
         return values, least
 
     # ------------------------------------------------------------------ decisions

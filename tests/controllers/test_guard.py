@@ -189,18 +189,17 @@ def test_of_the_actions_that_lose_fewest_the_guard_takes_the_preferred(prefer, w
     assert len(others) == 2
     crafted = {choice: (1.0, 90.0, 30.0), others[0]: (0.0, 50.0, 10.0),
                others[1]: (0.0, 20.0, 60.0)}
-    runs = []
+    asked = []
 
-    def evaluate(sim, actions, stop_at_loss=False, runs_per_action=None):
-        runs.append(runs_per_action)
+    def evaluate(sim, actions, stop_at_loss=False, runs=None):
+        asked.append(runs)
         return {a: crafted.get(a, (2.0, 0.0, 0.0)) for a in actions}, 0.0
 
-    guard.evaluate = lambda sim, actions, stop_at_loss=False, runs=None: evaluate(
-        sim, actions, stop_at_loss, runs)
+    guard.evaluate = evaluate
     assert guard.act(obs) == others[wanted] and guard.changes == 1
     # The check runs `samples` rollouts (the default); the comparison `compare_samples` (here
     # one: the config is nominal, so every rollout of an action is alike).
-    assert runs == [None, 1]
+    assert asked == [None, 1]
     guard.close()
     env.close()
 
