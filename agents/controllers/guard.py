@@ -14,7 +14,9 @@ uncertainties (wind gusts, charger and take-off failures) from generators of its
   base's choice loses at least ``min_lost`` vehicles on average over its rollouts (half a
   vehicle by default: a loss in at least half of them), the action with the fewest vehicles
   lost on average is taken: the base's choice where it ties for the fewest, else the one whose
-  rollouts earn the most reward (with ``prefer="margin"``: keep the most charge).
+  rollouts earn the most reward (with ``prefer="margin"``: keep the most charge). Such an
+  override needs a gain of at least ``min_saved`` vehicles on average (any gain by default),
+  and with ``override_takeoff=False`` it never takes off where the base's choice does not.
 
 A check that loses no vehicle and in which no live vehicle's charge falls below ``quiet_pct``
 lets the guard skip the checks of the next ``quiet_min`` minutes: most of a day is far from a
@@ -111,6 +113,11 @@ class GuardedController(ScratchRollouts, Controller):
             stands only if ``samples`` rollouts in which the base goes on deciding (``fleet``
             below ``defer_pct``) lose no vehicle either; otherwise ``fleet`` decides, checked
             as usual (default: off).
+        min_saved: an override must lose at least this many vehicles fewer on average over its
+            rollouts than the base's choice (default 0: any fewer); a smaller gain, within the
+            rollouts' noise, leaves the base's choice standing.
+        override_takeoff: whether an override may take off where the base's choice does not
+            (default: yes); ``False`` keeps every trip the guard starts one the base chose.
     """
 
     name = "guard"
@@ -121,7 +128,8 @@ class GuardedController(ScratchRollouts, Controller):
                  quiet_min: float = 10.0, seed: int = 0, min_lost: float = 0.5,
                  clairvoyant: bool = False, prefer: str = "reward",
                  fleet: str | Any | None = None, defer_pct: float = 0.0,
-                 margin_pct: float = 0.0, self_check: bool = False) -> None:
+                 margin_pct: float = 0.0, self_check: bool = False, min_saved: float = 0.0,
+                 override_takeoff: bool = True) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -133,6 +141,8 @@ class GuardedController(ScratchRollouts, Controller):
             raise ValueError(f"quiet_min must be >= 0 minutes, got {quiet_min}")
         if min_lost <= 0:
             raise ValueError(f"min_lost must be > 0 vehicles, got {min_lost}")
+        if min_saved < 0:
+            raise ValueError(f"min_saved must be >= 0 vehicles, got {min_saved}")
         if clairvoyant and nominal:
             raise ValueError("clairvoyant rollouts draw the env's own future: they cannot also "
                              "be nominal (without the config's uncertainties)")
@@ -167,6 +177,8 @@ class GuardedController(ScratchRollouts, Controller):
         self.quiet_min = float(quiet_min)
         self.seed = int(seed)
         self.min_lost = float(min_lost)
+        self.min_saved = float(min_saved)
+        self.override_takeoff = bool(override_takeoff)
         self.clairvoyant = bool(clairvoyant)
         self.prefer = prefer
         self.defer_pct = float(defer_pct)
@@ -350,11 +362,16 @@ class GuardedController(ScratchRollouts, Controller):
                 self._quiet_until_step = sim.step_count + int(
                     round(self.quiet_min / sim.cfg.schedule.minutes_per_step))
             return choice
-        values, _ = self.evaluate(sim, legal if choice in legal else [*legal, choice],
+        # The actions an override may pick: every legal one, but a take-off the base's choice
+        # did not make where overrides may not take off.
+        eligible = [a for a in legal if a == choice or self.override_takeoff
+                    or a != sim.actions.takeoff]
+        values, _ = self.evaluate(sim, eligible if choice in eligible else [*eligible, choice],
                                   runs=self._compare_runs)
         self.last_values = values
         fewest = min(v[0] for v in values.values())
-        if values[choice][0] <= fewest or values[choice][0] < self.min_lost:
+        saved = values[choice][0] - fewest
+        if saved <= 0 or saved < self.min_saved or values[choice][0] < self.min_lost:
             return choice
         col = PREFERRED_COLUMN[self.prefer]
         best = max((a for a in values if values[a][0] <= fewest), key=lambda a: values[a][col])

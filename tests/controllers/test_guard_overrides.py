@@ -1,0 +1,117 @@
+"""What an override of the guard may pick: ``min_saved`` leaves the base's choice standing
+unless another action loses that many vehicles fewer, and ``override_takeoff=False`` keeps the
+guard from starting a trip the base did not choose."""
+
+import numpy as np
+import pytest
+
+from agents.controllers.dispatcher import DispatcherController
+from agents.controllers.guard import GuardedController
+from agents.controllers.registry import make_controller
+from marl_vertiport import vertiport_v1
+from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
+
+
+def _decision_with_a_takeoff(env):
+    """Day 0 of ``env`` flown by the dispatcher up to a decision, on a port or a charger, whose
+    legal actions include a take-off the dispatcher does not choose and two other actions:
+    (that decision's observation, the dispatcher's choice, its legal actions)."""
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    dispatcher = DispatcherController()
+    dispatcher.bind(sim)
+    takeoff = sim.actions.takeoff
+    while True:
+        obs = env.observe(env.agent_selection)
+        legal = np.flatnonzero(obs["action_mask"]).tolist()
+        choice = dispatcher.act(obs)
+        if (sim.status[sim.acting] in (ON_PORT, ON_CHARGER) and takeoff in legal
+                and choice != takeoff and len(legal) >= 3):
+            return obs, choice, legal
+        env.step(choice)
+
+
+def _crafted(guard, values):
+    """Make ``guard``'s rollouts return ``values`` (per action: mean lost, reward, least charge;
+    an action not named loses two vehicles); returns the list of the actions each call asked."""
+    asked = []
+
+    def evaluate(sim, actions, stop_at_loss=False, runs=None):
+        asked.append(list(actions))
+        return {a: values.get(a, (2.0, 0.0, 0.0)) for a in actions}, 0.0
+
+    guard.evaluate = evaluate
+    return asked
+
+
+def test_the_override_arguments_are_validated_and_parsed():
+    with pytest.raises(ValueError, match="min_saved"):
+        GuardedController(min_saved=-0.25)
+    guard = make_controller("handback[min_saved=0.5,override_takeoff=false]")
+    assert guard.min_saved == 0.5 and guard.override_takeoff is False
+    guard.close()
+    default = GuardedController()
+    assert default.min_saved == 0.0 and default.override_takeoff is True
+    default.close()
+
+
+@pytest.mark.parametrize("min_saved, changed", [(0.0, True), (0.5, True), (0.75, False)])
+def test_min_saved_is_the_least_gain_an_override_needs(min_saved, changed):
+    """The base's choice loses 0.75 vehicles on average, another action 0.25: a gain of 0.5,
+    enough for an override up to ``min_saved=0.5`` and not above."""
+    env = vertiport_v1.env(config="paper")
+    obs, choice, legal = _decision_with_a_takeoff(env)
+    guard = GuardedController(nominal=True, min_saved=min_saved)
+    guard.reset(seed=0)
+    guard.bind(env.unwrapped.sim)
+    other = next(a for a in legal if a != choice)
+    _crafted(guard, {choice: (0.75, 50.0, 20.0), other: (0.25, 10.0, 20.0)})
+    assert guard.act(obs) == (other if changed else choice)
+    assert guard.changes == int(changed) and guard.last_changed == changed
+    guard.close()
+    env.close()
+
+
+@pytest.mark.parametrize("override_takeoff", [True, False])
+def test_without_override_takeoff_the_guard_starts_no_trip_the_base_did_not_choose(
+        override_takeoff):
+    """The base's choice loses a vehicle; the take-off loses none and another action loses
+    fewer than the choice. With ``override_takeoff`` the guard takes off; without, the take-off
+    is not even rolled out and the other action is taken."""
+    env = vertiport_v1.env(config="paper")
+    obs, choice, legal = _decision_with_a_takeoff(env)
+    sim = env.unwrapped.sim
+    takeoff = sim.actions.takeoff
+    guard = GuardedController(nominal=True, override_takeoff=override_takeoff)
+    guard.reset(seed=0)
+    guard.bind(sim)
+    other = next(a for a in legal if a not in (choice, takeoff))
+    asked = _crafted(guard, {choice: (1.0, 50.0, 20.0), takeoff: (0.0, 90.0, 50.0),
+                             other: (0.5, 10.0, 20.0)})
+    assert guard.act(obs) == (takeoff if override_takeoff else other)
+    assert asked[0] == [choice]  # the check
+    assert (takeoff in asked[1]) == override_takeoff and choice in asked[1]
+    assert set(asked[1]) | {takeoff} == set(legal)
+    guard.close()
+    env.close()
+
+
+def test_without_override_takeoff_the_base_may_still_take_off():
+    """A take-off the base chose is compared as usual and stands where nothing loses fewer."""
+    env = vertiport_v1.env(config="paper")
+    obs, _, legal = _decision_with_a_takeoff(env)
+    sim = env.unwrapped.sim
+    takeoff = sim.actions.takeoff
+
+    class _TakesOff(DispatcherController):
+        def act(self, observation):
+            return takeoff
+
+    guard = GuardedController(base=_TakesOff(), nominal=True, override_takeoff=False)
+    guard.reset(seed=0)
+    guard.bind(sim)
+    asked = _crafted(guard, {a: (1.0, 0.0, 20.0) for a in legal})
+    assert guard.act(obs) == takeoff and guard.changes == 0
+    assert takeoff in asked[1]
+    guard.close()
+    env.close()
