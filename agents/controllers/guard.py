@@ -18,6 +18,11 @@ uncertainties (wind gusts, charger and take-off failures) from generators of its
   override needs a gain of at least ``min_saved`` vehicles on average (any gain by default),
   and with ``override_takeoff=False`` it never takes off where the base's choice does not.
 
+With ``floor_pct`` above 0 the rollouts count a near loss as a loss: a vehicle whose charge falls
+below ``floor_pct`` (%) in a rollout, having started it at or above, is counted as lost there, in
+the check and in the comparison alike. Four draws of the gusts and failures under-sample the bad
+ones; the floor keeps a charge margin for what they miss.
+
 A check that loses no vehicle and in which no live vehicle's charge falls below ``quiet_pct``
 lets the guard skip the checks of the next ``quiet_min`` minutes: most of a day is far from a
 loss, and the checks cost the rollouts.
@@ -118,6 +123,9 @@ class GuardedController(ScratchRollouts, Controller):
             rollouts' noise, leaves the base's choice standing.
         override_takeoff: whether an override may take off where the base's choice does not
             (default: yes); ``False`` keeps every trip the guard starts one the base chose.
+        floor_pct: a live vehicle whose charge falls below this (%) in a rollout, having
+            started the rollout at or above it, counts as lost in that rollout (0, default: only
+            a depleted battery is a loss).
     """
 
     name = "guard"
@@ -129,7 +137,7 @@ class GuardedController(ScratchRollouts, Controller):
                  clairvoyant: bool = False, prefer: str = "reward",
                  fleet: str | Any | None = None, defer_pct: float = 0.0,
                  margin_pct: float = 0.0, self_check: bool = False, min_saved: float = 0.0,
-                 override_takeoff: bool = True) -> None:
+                 override_takeoff: bool = True, floor_pct: float = 0.0) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -148,10 +156,11 @@ class GuardedController(ScratchRollouts, Controller):
                              "be nominal (without the config's uncertainties)")
         if prefer not in PREFERRED_COLUMN:
             raise ValueError(f"prefer must be one of {sorted(PREFERRED_COLUMN)}, got {prefer!r}")
-        for name, pct in (("defer_pct", defer_pct), ("margin_pct", margin_pct)):
+        for name, pct in (("defer_pct", defer_pct), ("margin_pct", margin_pct),
+                          ("floor_pct", floor_pct)):
             if not 0.0 <= pct <= 100.0:
                 raise ValueError(f"{name} must be a charge in [0, 100] %, got {pct}")
-            if pct > 0 and fleet is None:
+            if pct > 0 and fleet is None and name != "floor_pct":
                 raise ValueError(f"{name} hands decisions to fleet: it needs a fleet of its "
                                  f"own (e.g. guard[base=gcn,fleet=heuristic,{name}=30])")
         if self_check and fleet is None:
@@ -179,6 +188,7 @@ class GuardedController(ScratchRollouts, Controller):
         self.min_lost = float(min_lost)
         self.min_saved = float(min_saved)
         self.override_takeoff = bool(override_takeoff)
+        self.floor_pct = float(floor_pct)
         self.clairvoyant = bool(clairvoyant)
         self.prefer = prefer
         self.defer_pct = float(defer_pct)
@@ -255,7 +265,7 @@ class GuardedController(ScratchRollouts, Controller):
                  stop_at_loss: bool = False, policy: Any = None, runs: int | None = None
                  ) -> tuple[dict[int, tuple[float, float, float]], float]:
         """Per action, the mean over its rollouts of the vehicles lost (beyond those already
-        lost), of the reward and of the least charge (%) of a live vehicle in the rollout; and
+        lost; with ``floor_pct``, also those whose charge fell below it), of the reward and of the least charge (%) of a live vehicle in the rollout; and
         the least charge (%) of a live vehicle seen in any rollout step. ``stop_at_loss``: stop
         an action's rollouts at the first that loses a vehicle (its means are then over the
         rollouts run). ``policy`` flies the rollouts (default: :attr:`rollout_policy`);
@@ -268,11 +278,17 @@ class GuardedController(ScratchRollouts, Controller):
         steps = self.horizon_steps(sim)
         lost_before = int(np.count_nonzero(sim.lost))
         run_least = [100.0]
+        # The vehicles the floor watches (live and at or above it now), and those of them that
+        # fell below it in the current rollout.
+        floored = ~sim.lost & (sim.battery >= self.floor_pct) if self.floor_pct > 0 else None
+        below = np.zeros(sim.lost.shape, dtype=bool)
 
         def watch(s: VertiportSim) -> None:
             live = ~s.lost
             if live.any():
                 run_least[0] = min(run_least[0], float(s.battery[live].min()))
+            if floored is not None:
+                below[floored & live & (s.battery < self.floor_pct)] = True
 
         least = 100.0
         values: dict[int, tuple[float, float, float]] = {}
@@ -283,8 +299,9 @@ class GuardedController(ScratchRollouts, Controller):
                 rng = None if self.clairvoyant else np.random.default_rng(
                     (self.seed, self._episode_seed, sim.step_count, k))
                 run_least[0] = 100.0
+                below[:] = False
                 reward += roll_out(scratch, builder, policy, snap, a, steps, rng, watch)
-                lost += int(np.count_nonzero(scratch.lost)) - lost_before
+                lost += int(np.count_nonzero(scratch.lost | below)) - lost_before
                 margin += run_least[0]
                 least = min(least, run_least[0])
                 played += 1
