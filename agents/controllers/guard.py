@@ -18,6 +18,10 @@ uncertainties (wind gusts, charger and take-off failures) from generators of its
   override needs a gain of at least ``min_saved`` vehicles on average (any gain by default),
   and with ``override_takeoff=False`` it never takes off where the base's choice does not.
 
+With ``port_hops=False`` a vehicle on a normal port never taxis to another normal port, a move
+the dispatcher never makes (it idles at the ground drain all the way and trades one normal port
+for another): such a choice of the base is handed to ``fleet`` (``stay`` without one), and an override never makes it.
+
 With ``floor_pct`` above 0 the rollouts count a near loss as a loss: a vehicle whose charge falls
 below ``floor_pct`` (%) in a rollout, having started it at or above, is counted as lost there, in
 the check and in the comparison alike. Four draws of the gusts and failures under-sample the bad
@@ -126,6 +130,9 @@ class GuardedController(ScratchRollouts, Controller):
         floor_pct: a live vehicle whose charge falls below this (%) in a rollout, having
             started the rollout at or above it, counts as lost in that rollout (0, default: only
             a depleted battery is a loss).
+        port_hops: whether a vehicle on a normal port may taxi to another normal port (default:
+            yes); ``False`` hands such a choice of the base to ``fleet`` (``stay`` without
+            one) and keeps the override from making it.
     """
 
     name = "guard"
@@ -137,7 +144,8 @@ class GuardedController(ScratchRollouts, Controller):
                  clairvoyant: bool = False, prefer: str = "reward",
                  fleet: str | Any | None = None, defer_pct: float = 0.0,
                  margin_pct: float = 0.0, self_check: bool = False, min_saved: float = 0.0,
-                 override_takeoff: bool = True, floor_pct: float = 0.0) -> None:
+                 override_takeoff: bool = True, floor_pct: float = 0.0,
+                 port_hops: bool = True) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -189,6 +197,7 @@ class GuardedController(ScratchRollouts, Controller):
         self.min_saved = float(min_saved)
         self.override_takeoff = bool(override_takeoff)
         self.floor_pct = float(floor_pct)
+        self.port_hops = bool(port_hops)
         self.clairvoyant = bool(clairvoyant)
         self.prefer = prefer
         self.defer_pct = float(defer_pct)
@@ -338,6 +347,13 @@ class GuardedController(ScratchRollouts, Controller):
         self.deferrals += 1
         return int(self.fleet.act(observation))
 
+    def _hops(self, sim: VertiportSim, v: int) -> set[int]:
+        """The actions that taxi vehicle ``v`` from a normal port to another normal port, where
+        ``port_hops`` rules them out (empty otherwise)."""
+        if self.port_hops or sim.status[v] != ON_PORT:
+            return set()
+        return {sim.actions.node_action(k) for k in range(sim.layout.n_normal)}
+
     def act(self, observation: dict) -> int:
         sim = self.sim
         if sim is None:
@@ -349,6 +365,12 @@ class GuardedController(ScratchRollouts, Controller):
             choice = self._fleet_decides(observation)
         else:
             choice = int(self.base.act(observation))
+        hops = self._hops(sim, v)
+        if choice in hops:  # a taxi from a normal port to another: fleet decides, or stay
+            if self.fleet is not None:
+                choice = self._fleet_decides(observation)
+            if choice in hops:
+                choice = sim.actions.stay
         self.last_values = {}
         self.last_changed = False
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING) or sim.step_count < self._quiet_until_step:
@@ -380,9 +402,10 @@ class GuardedController(ScratchRollouts, Controller):
                     round(self.quiet_min / sim.cfg.schedule.minutes_per_step))
             return choice
         # The actions an override may pick: every legal one, but a take-off the base's choice
-        # did not make where overrides may not take off.
-        eligible = [a for a in legal if a == choice or self.override_takeoff
-                    or a != sim.actions.takeoff]
+        # did not make where overrides may not take off, and a taxi to another normal port
+        # where those are ruled out.
+        eligible = [a for a in legal if a == choice or (
+            self.override_takeoff or a != sim.actions.takeoff) and a not in hops]
         values, _ = self.evaluate(sim, eligible if choice in eligible else [*eligible, choice],
                                   runs=self._compare_runs)
         self.last_values = values
@@ -406,6 +429,13 @@ class _Onward:
         self.policy, self.fleet, self.defer_pct = policy, fleet, defer_pct
         self.pure_act = bool(getattr(policy, "pure_act", False) and getattr(fleet, "pure_act", False))
         self.sim: VertiportSim | None = None
+
+    def _hops(self, sim: VertiportSim, v: int) -> set[int]:
+        """The actions that taxi vehicle ``v`` from a normal port to another normal port, where
+        ``port_hops`` rules them out (empty otherwise)."""
+        if self.port_hops or sim.status[v] != ON_PORT:
+            return set()
+        return {sim.actions.node_action(k) for k in range(sim.layout.n_normal)}
 
     def act(self, observation: dict) -> int:
         sim = self.sim

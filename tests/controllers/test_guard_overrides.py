@@ -1,6 +1,7 @@
 """What an override of the guard may pick: ``min_saved`` leaves the base's choice standing
-unless another action loses that many vehicles fewer, and ``override_takeoff=False`` keeps the
-guard from starting a trip the base did not choose."""
+unless another action loses that many vehicles fewer, ``override_takeoff=False`` keeps the
+guard from starting a trip the base did not choose, and ``port_hops=False`` from taxiing a
+vehicle between normal ports (the base's own hop is handed over too)."""
 
 import numpy as np
 import pytest
@@ -47,11 +48,13 @@ def _crafted(guard, values):
 def test_the_override_arguments_are_validated_and_parsed():
     with pytest.raises(ValueError, match="min_saved"):
         GuardedController(min_saved=-0.25)
-    guard = make_controller("handback[min_saved=0.5,override_takeoff=false]")
+    guard = make_controller("handback[min_saved=0.5,override_takeoff=false,port_hops=false]")
     assert guard.min_saved == 0.5 and guard.override_takeoff is False
+    assert guard.port_hops is False
     guard.close()
     default = GuardedController()
     assert default.min_saved == 0.0 and default.override_takeoff is True
+    assert default.port_hops is True
     default.close()
 
 
@@ -114,4 +117,80 @@ def test_without_override_takeoff_the_base_may_still_take_off():
     assert guard.act(obs) == takeoff and guard.changes == 0
     assert takeoff in asked[1]
     guard.close()
+    env.close()
+
+
+def _decision_with_a_hop(env):
+    """The first day of ``env``, flown by the dispatcher, with a decision of a vehicle on a
+    normal port that may taxi to the other normal port (rare: the dispatcher seldom lands on
+    one), played up to it: (its observation, the dispatcher's choice, the hop)."""
+    for seed in range(20):
+        env.reset(seed=seed)
+        sim = env.unwrapped.sim
+        dispatcher = DispatcherController()
+        dispatcher.bind(sim)
+        hops = [sim.actions.node_action(k) for k in range(sim.layout.n_normal)]
+        for agent in env.agent_iter():
+            if env.terminations[agent] or env.truncations[agent]:
+                env.step(None)
+                continue
+            obs = env.observe(agent)
+            choice = dispatcher.act(obs)
+            hop = next((a for a in hops if obs["action_mask"][a]), None)
+            if sim.status[sim.acting] == ON_PORT and hop is not None:
+                return obs, choice, hop
+            env.step(choice)
+    raise AssertionError("no decision with a taxi between normal ports in 20 days")
+
+
+class _Hops(DispatcherController):
+    """The dispatcher, except that a vehicle on a normal port taxis to another if it may."""
+
+    def act(self, observation):
+        mask = observation["action_mask"]
+        for a in self.hop_actions:
+            if mask[a]:
+                return a
+        return super().act(observation)
+
+
+@pytest.mark.parametrize("fleet", [None, "heuristic"])
+def test_without_port_hops_a_taxi_between_normal_ports_is_handed_over(fleet):
+    """A base that hops: with ``port_hops`` its hop stands where the check is clean; without,
+    ``fleet`` decides (``stay`` without a fleet), and the choice is never a hop."""
+    env = vertiport_v1.env(config="paper")
+    obs, dispatcher_choice, hop = _decision_with_a_hop(env)
+    sim = env.unwrapped.sim
+    base = _Hops()
+    base.hop_actions = [sim.actions.node_action(k) for k in range(sim.layout.n_normal)]
+    assert dispatcher_choice not in base.hop_actions and obs["action_mask"][sim.actions.stay]
+    wanted = dispatcher_choice if fleet else sim.actions.stay
+    for port_hops in (True, False):
+        guard = GuardedController(base=base, nominal=True, fleet=fleet, port_hops=port_hops)
+        guard.reset(seed=0)
+        guard.bind(sim)
+        _crafted(guard, {a: (0.0, 0.0, 50.0) for a in range(sim.actions.n)})
+        assert guard.act(obs) == (hop if port_hops else wanted)
+        assert guard.deferrals == int(not port_hops and fleet is not None)
+        guard.close()
+    env.close()
+
+
+def test_without_port_hops_no_override_taxis_between_normal_ports():
+    """The base's choice loses a vehicle, the hop loses none and another action fewer than the
+    choice: without ``port_hops`` the other action is taken and the hop is not rolled out."""
+    env = vertiport_v1.env(config="paper")
+    obs, choice, hop = _decision_with_a_hop(env)
+    sim = env.unwrapped.sim
+    legal = np.flatnonzero(obs["action_mask"]).tolist()
+    other = next(a for a in legal if a not in (choice, hop))
+    for port_hops, picked in ((True, hop), (False, other)):
+        guard = GuardedController(nominal=True, port_hops=port_hops)
+        guard.reset(seed=0)
+        guard.bind(sim)
+        asked = _crafted(guard, {choice: (1.0, 50.0, 20.0), hop: (0.0, 90.0, 50.0),
+                                 other: (0.0, 10.0, 20.0)})
+        assert guard.act(obs) == picked
+        assert (hop in asked[1]) == port_hops
+        guard.close()
     env.close()
