@@ -44,10 +44,11 @@ def _guarded_actions(env, guard, seed: int) -> list[int]:
     return actions
 
 
-def _dispatcher_day_to_a_choice(env, min_legal: int):
-    """Day 0 of ``env`` flown by the dispatcher up to a decision of a vehicle on a port, on a
-    charger or hovering with at least ``min_legal`` legal actions: (the dispatcher, bound to
-    the simulator; that decision's observation; its legal actions)."""
+def _dispatcher_day_to_a_choice(env, min_legal: int, from_step: int = 0):
+    """Day 0 of ``env`` flown by the dispatcher up to a decision, at step ``from_step`` or
+    later, of a vehicle on a port, on a charger or hovering with at least ``min_legal`` legal
+    actions: (the dispatcher, bound to the simulator; that decision's observation; its legal
+    actions)."""
     env.reset(seed=0)
     sim = env.unwrapped.sim
     dispatcher = DispatcherController()
@@ -55,7 +56,8 @@ def _dispatcher_day_to_a_choice(env, min_legal: int):
     while True:
         obs = env.observe(env.agent_selection)
         legal = np.flatnonzero(obs["action_mask"]).tolist()
-        if len(legal) >= min_legal and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING):
+        if (len(legal) >= min_legal and sim.step_count >= from_step
+                and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)):
             return dispatcher, obs, legal
         env.step(dispatcher.act(obs))
 

@@ -4,29 +4,11 @@ started it at or above, counts as lost there; a vehicle already below counts onl
 import numpy as np
 import pytest
 
-from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.guard import GuardedController
 from agents.controllers.planner import roll_out
 from agents.controllers.registry import make_controller
 from marl_vertiport import vertiport_v1
-from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
-
-
-def _busy_decision(env, step: int):
-    """Day 0 of ``env`` flown by the dispatcher to the first decision at or after ``step`` of a
-    vehicle on a port, on a charger or hovering, with at least two legal actions: its legal
-    actions."""
-    env.reset(seed=0)
-    sim = env.unwrapped.sim
-    dispatcher = DispatcherController()
-    dispatcher.bind(sim)
-    while True:
-        obs = env.observe(env.agent_selection)
-        legal = np.flatnonzero(obs["action_mask"]).tolist()
-        if (sim.step_count >= step and len(legal) >= 2
-                and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)):
-            return legal
-        env.step(dispatcher.act(obs))
+from tests.controllers.test_guard import _dispatcher_day_to_a_choice
 
 
 def _counted_by_hand(guard, sim, action: int, floor_pct: float) -> int:
@@ -63,7 +45,7 @@ def test_the_floor_counts_the_vehicles_that_fall_below_it_as_lost():
     start below it (counted only if lost) and others fall below it (counted); every legal
     action's count matches a rollout counted by hand, and without a floor only losses count."""
     env = vertiport_v1.env(config="paper")
-    legal = _busy_decision(env, step=300)
+    _, _, legal = _dispatcher_day_to_a_choice(env, min_legal=2, from_step=300)
     sim = env.unwrapped.sim
     live = sim.battery[~sim.lost]
     floor_pct = float(np.median(live)) + 0.5
