@@ -20,7 +20,8 @@ uncertainties (wind gusts, charger and take-off failures) from generators of its
 
 With ``port_hops=False`` a vehicle on a normal port never taxis to another normal port, a move
 the dispatcher never makes (it idles at the ground drain all the way and trades one normal port
-for another): such a choice of the base is handed to ``fleet`` (``stay`` without one), and an override never makes it.
+for another): such a choice of the base is handed to ``fleet`` (``stay`` without one), and an
+override never makes it.
 
 With ``floor_pct`` above 0 the rollouts count a near loss as a loss: a vehicle whose charge falls
 below ``floor_pct`` (%) in a rollout, having started it at or above, is counted as lost there, in
@@ -168,7 +169,8 @@ class GuardedController(ScratchRollouts, Controller):
                           ("floor_pct", floor_pct)):
             if not 0.0 <= pct <= 100.0:
                 raise ValueError(f"{name} must be a charge in [0, 100] %, got {pct}")
-            if pct > 0 and fleet is None and name != "floor_pct":
+        for name, pct in (("defer_pct", defer_pct), ("margin_pct", margin_pct)):
+            if pct > 0 and fleet is None:
                 raise ValueError(f"{name} hands decisions to fleet: it needs a fleet of its "
                                  f"own (e.g. guard[base=gcn,fleet=heuristic,{name}=30])")
         if self_check and fleet is None:
@@ -274,8 +276,9 @@ class GuardedController(ScratchRollouts, Controller):
                  stop_at_loss: bool = False, policy: Any = None, runs: int | None = None
                  ) -> tuple[dict[int, tuple[float, float, float]], float]:
         """Per action, the mean over its rollouts of the vehicles lost (beyond those already
-        lost; with ``floor_pct``, also those whose charge fell below it), of the reward and of the least charge (%) of a live vehicle in the rollout; and
-        the least charge (%) of a live vehicle seen in any rollout step. ``stop_at_loss``: stop
+        lost; with ``floor_pct``, also those whose charge fell below it), of the reward and of
+        the least charge (%) of a live vehicle in the rollout; and the least charge (%) of a
+        live vehicle seen in any rollout step. ``stop_at_loss``: stop
         an action's rollouts at the first that loses a vehicle (its means are then over the
         rollouts run). ``policy`` flies the rollouts (default: :attr:`rollout_policy`);
         ``runs`` rollouts per action (default: ``samples``, one where they are all alike)."""
@@ -429,13 +432,6 @@ class _Onward:
         self.policy, self.fleet, self.defer_pct = policy, fleet, defer_pct
         self.pure_act = bool(getattr(policy, "pure_act", False) and getattr(fleet, "pure_act", False))
         self.sim: VertiportSim | None = None
-
-    def _hops(self, sim: VertiportSim, v: int) -> set[int]:
-        """The actions that taxi vehicle ``v`` from a normal port to another normal port, where
-        ``port_hops`` rules them out (empty otherwise)."""
-        if self.port_hops or sim.status[v] != ON_PORT:
-            return set()
-        return {sim.actions.node_action(k) for k in range(sim.layout.n_normal)}
 
     def act(self, observation: dict) -> int:
         sim = self.sim
