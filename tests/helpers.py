@@ -87,3 +87,28 @@ def small_actor(hidden: int = 16, hidden_dims: tuple[int, ...] = (32,)):
     probe.close()
     return GraphActor(example, {"actor": ["port_nodes", "evtol_nodes", "self"]}, "actor", 1,
                       feature_names("observation"), hidden=hidden, hidden_dims=list(hidden_dims))
+
+
+def dispatcher_decision(env, found, seeds=(0,)):
+    """The first decision at which ``found(sim, obs, legal, choice)`` holds, on days ``seeds``
+    (in order) of the AEC ``env`` flown by the dispatcher, with the day played up to it:
+    (the dispatcher, bound to the simulator; that decision's observation; the dispatcher's
+    choice; the legal actions, a list)."""
+    from agents.controllers.dispatcher import DispatcherController
+
+    for seed in seeds:
+        env.reset(seed=seed)
+        sim = env.unwrapped.sim
+        dispatcher = DispatcherController()
+        dispatcher.bind(sim)
+        for agent in env.agent_iter():
+            if env.terminations[agent] or env.truncations[agent]:
+                env.step(None)
+                continue
+            obs = env.observe(agent)
+            legal = np.flatnonzero(obs["action_mask"]).tolist()
+            choice = dispatcher.act(obs)
+            if found(sim, obs, legal, choice):
+                return dispatcher, obs, choice, legal
+            env.step(choice)
+    raise AssertionError(f"no such decision on days {list(seeds)} flown by the dispatcher")

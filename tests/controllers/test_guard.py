@@ -9,6 +9,7 @@ from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.episode import run_episode
 from agents.controllers.guard import GuardedController
 from agents.controllers.registry import make_controller
+from helpers import dispatcher_decision
 from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
@@ -49,17 +50,10 @@ def _dispatcher_day_to_a_choice(env, min_legal: int, from_step: int = 0):
     later, of a vehicle on a port, on a charger or hovering with at least ``min_legal`` legal
     actions: (the dispatcher, bound to the simulator; that decision's observation; its legal
     actions)."""
-    env.reset(seed=0)
-    sim = env.unwrapped.sim
-    dispatcher = DispatcherController()
-    dispatcher.bind(sim)
-    while True:
-        obs = env.observe(env.agent_selection)
-        legal = np.flatnonzero(obs["action_mask"]).tolist()
-        if (len(legal) >= min_legal and sim.step_count >= from_step
-                and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)):
-            return dispatcher, obs, legal
-        env.step(dispatcher.act(obs))
+    dispatcher, obs, _, legal = dispatcher_decision(env, lambda sim, obs, legal, choice: (
+        len(legal) >= min_legal and sim.step_count >= from_step
+        and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)))
+    return dispatcher, obs, legal
 
 
 def test_guard_keeps_the_vehicles_its_base_loses():

@@ -9,6 +9,7 @@ import pytest
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.guard import GuardedController
 from agents.controllers.registry import make_controller
+from helpers import dispatcher_decision
 from marl_vertiport import vertiport_v1
 from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
 
@@ -17,19 +18,10 @@ def _decision_with_a_takeoff(env):
     """Day 0 of ``env`` flown by the dispatcher up to a decision, on a port or a charger, whose
     legal actions include a take-off the dispatcher does not choose and two other actions:
     (that decision's observation, the dispatcher's choice, its legal actions)."""
-    env.reset(seed=0)
-    sim = env.unwrapped.sim
-    dispatcher = DispatcherController()
-    dispatcher.bind(sim)
-    takeoff = sim.actions.takeoff
-    while True:
-        obs = env.observe(env.agent_selection)
-        legal = np.flatnonzero(obs["action_mask"]).tolist()
-        choice = dispatcher.act(obs)
-        if (sim.status[sim.acting] in (ON_PORT, ON_CHARGER) and takeoff in legal
-                and choice != takeoff and len(legal) >= 3):
-            return obs, choice, legal
-        env.step(choice)
+    _, obs, choice, legal = dispatcher_decision(env, lambda sim, obs, legal, choice: (
+        sim.status[sim.acting] in (ON_PORT, ON_CHARGER) and sim.actions.takeoff in legal
+        and choice != sim.actions.takeoff and len(legal) >= 3))
+    return obs, choice, legal
 
 
 def _crafted(guard, values):
@@ -124,23 +116,13 @@ def _decision_with_a_hop(env):
     """The first day of ``env``, flown by the dispatcher, with a decision of a vehicle on a
     normal port that may taxi to the other normal port (rare: the dispatcher seldom lands on
     one), played up to it: (its observation, the dispatcher's choice, the hop)."""
-    for seed in range(20):
-        env.reset(seed=seed)
-        sim = env.unwrapped.sim
-        dispatcher = DispatcherController()
-        dispatcher.bind(sim)
-        hops = [sim.actions.node_action(k) for k in range(sim.layout.n_normal)]
-        for agent in env.agent_iter():
-            if env.terminations[agent] or env.truncations[agent]:
-                env.step(None)
-                continue
-            obs = env.observe(agent)
-            choice = dispatcher.act(obs)
-            hop = next((a for a in hops if obs["action_mask"][a]), None)
-            if sim.status[sim.acting] == ON_PORT and hop is not None:
-                return obs, choice, hop
-            env.step(choice)
-    raise AssertionError("no decision with a taxi between normal ports in 20 days")
+    def hop(sim, legal):
+        return next((a for a in map(sim.actions.node_action, range(sim.layout.n_normal))
+                     if a in legal), None)
+
+    _, obs, choice, legal = dispatcher_decision(env, lambda sim, obs, legal, choice: (
+        sim.status[sim.acting] == ON_PORT and hop(sim, legal) is not None), seeds=range(20))
+    return obs, choice, hop(env.unwrapped.sim, legal)
 
 
 class _Hops(DispatcherController):
