@@ -32,8 +32,8 @@ minutes (the round-robin), so every timing decision looks one turn ahead:
   (the fleet size times the env's minutes per step, so a scenario that decides twice a minute
   has turns half as far apart). Unbound, it takes off at 90 %.
 
-Two rules are options, off by default (tried on validation days, docs/environment.md, section
-8.3; neither is part of the frozen dispatcher):
+Three rules are options, off by default (tried on validation days, docs/environment.md, section
+8.3, and docs/training.md; none is part of the frozen dispatcher):
 
 * **Departures first** (``yield_margin_pct``). Bound, a hovering vehicle that can afford to
   wait (after one more turn of hovering it would still hold the dearest take-off need and
@@ -46,6 +46,11 @@ Two rules are options, off by default (tried on validation days, docs/environmen
   also needs ``departure_hold_min`` minutes of hovering for each other vehicle departing: the
   separation check may hold it over its pad behind each of them, at the hover drain, while on
   the charger the wait costs nothing.
+* **Low arrivals first** (``arrival_priority_pct``). With the holding pattern, a hovering
+  vehicle yields a free charging port to a vehicle still arriving with less charge than
+  ``arrival_priority_pct`` (and ``priority_margin_pct`` less than its own), as it does to a
+  needier vehicle waiting aloft: the arriving vehicle will want the charger within a turn or
+  two, and a vehicle that lands on it first keeps it until charged for a trip.
 
 ``DispatcherController(holding=False)`` is the earlier dispatcher without the holding pattern
 and the priority (hovering vehicles wait in place, first come first served); the two are
@@ -128,6 +133,10 @@ class DispatcherController(Controller):
             hold this much more than the dearest take-off need (``None``, the default: never).
         departure_hold_min: bound: minutes of hovering a take-off from a charging port needs
             for each other vehicle departing (0, the default: none).
+        arrival_priority_pct: with the holding pattern, a hovering vehicle also yields the
+            charger to an arriving vehicle with less than this charge (%) and
+            ``priority_margin_pct`` less than its own (``None``, the default: only to vehicles
+            waiting aloft).
     """
 
     name = "heuristic"
@@ -143,7 +152,8 @@ class DispatcherController(Controller):
                  ground_idle_drain_pct_per_min: float = 4.0,
                  leave_margin_pct: float = 20.0,
                  yield_margin_pct: float | None = None,
-                 departure_hold_min: float = 0.0) -> None:
+                 departure_hold_min: float = 0.0,
+                 arrival_priority_pct: float | None = None) -> None:
         self.trip_battery_pct = trip_battery_pct
         self.hop_battery_pct = hop_battery_pct
         self.early_release_battery_pct = early_release_battery_pct
@@ -162,6 +172,7 @@ class DispatcherController(Controller):
         self.leave_margin_pct = leave_margin_pct
         self.yield_margin_pct = yield_margin_pct
         self.departure_hold_min = departure_hold_min
+        self.arrival_priority_pct = arrival_priority_pct
         #: Schedule minutes per step (bound: the env's; unbound, the paper's one minute).
         self.minutes_per_step = 1.0
         self._holding_memo: dict[tuple, int | None] = {}
@@ -353,8 +364,13 @@ class DispatcherController(Controller):
         chargers = obs.reachable_nodes(CHARGING_PORT)
         if self.holding and chargers.size and obs.mask[obs.stay]:
             others = np.arange(len(obs.fleet("status"))) != obs.me
-            needier = others & self._waiting_aloft(obs) & (
-                obs.fleet("battery_pct") < obs.mine("battery_pct") - self.priority_margin_pct)
+            battery = obs.fleet("battery_pct")
+            waiting = self._waiting_aloft(obs)
+            if self.arrival_priority_pct is not None:  # and the low vehicles arriving
+                waiting = waiting | ((obs.fleet("status").astype(int) == ARRIVING)
+                                     & (battery < self.arrival_priority_pct))
+            needier = others & waiting & (
+                battery < obs.mine("battery_pct") - self.priority_margin_pct)
             if int(needier.sum()) >= chargers.size:
                 chargers = chargers[:0]  # yield the charger to a needier vehicle
         if chargers.size:

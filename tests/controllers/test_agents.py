@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from agents.controllers.base import (
-    AWAY, DEPARTING, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation,
+    ARRIVING, AWAY, DEPARTING, HOVERING, ON_CHARGER, ON_PORT, TAXIING, Observation,
 )
 from agents.controllers.episode import run_aec_episode, run_gym_episode
 from agents.controllers.fcfs import FCFSController
@@ -256,6 +256,22 @@ def test_departure_hold_option_raises_a_take_off_need_on_the_charger_per_departi
     assert d._takeoff_need(Observation(obs)) == pytest.approx(base + 2 * 5 * 2.0)
     on_port = _hold_obs([60.0, 90.0, 90.0], [ON_PORT, DEPARTING, DEPARTING], set(), [0, 1, 2])
     assert d._takeoff_need(Observation(on_port)) == float(d._takeoff_need_pct[0])  # chargers only
+
+
+def test_low_arrivals_first_option_yields_the_charger_to_a_low_vehicle_still_arriving():
+    # Vehicle 0 hovers at spot 9 with 69 %, the charger (node 2) and spot 3 free; vehicle 1
+    # arrives (bound for spot 8) with ``arriving`` %.
+    def arrival(arriving):
+        return _hold_obs([69.0, arriving], [HOVERING, ARRIVING], {2, 3}, [9, 8])
+
+    option, default = DispatcherController(arrival_priority_pct=40.0), DispatcherController()
+    assert default.act(arrival(32.0)) == 4  # off by default: it lands on the charger
+    assert option.act(arrival(32.0)) == 2 + 3  # it holds beside the charger instead
+    assert option.act(arrival(45.0)) == 4  # not low enough to be given the charger
+    assert option.act(_hold_obs([35.0, 32.0], [HOVERING, ARRIVING], {2, 3}, [9, 8])) == 4
+    # Within the priority margin (35 % against 32 %) the hovering vehicle keeps its turn.
+    plain = DispatcherController(holding=False, arrival_priority_pct=40.0)
+    assert plain.act(arrival(32.0)) == 4  # without the holding pattern, no priority at all
 
 
 def test_bound_dispatcher_counts_turns_in_minutes_where_the_atc_decides_twice_a_minute():
