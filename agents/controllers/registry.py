@@ -10,8 +10,10 @@ of a training checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemb
 
 A built-in name or an import path may carry constructor arguments in brackets, values read as
 YAML: ``heuristic[holding=false]``, ``rollout[horizon=80,nominal=false]``,
-``examples.custom_agent:ChargeFirst[low_battery_pct=40]``. The whole spec (arguments included)
-names the controller in tables, so two settings of one controller can be compared side by side.
+``examples.custom_agent:ChargeFirst[low_battery_pct=40]``; an argument that names a controller
+may carry brackets of its own: ``handback[fleet=heuristic[arrival_priority_pct=40]]``. The
+whole spec (arguments included) names the controller in tables, so two settings of one
+controller can be compared side by side.
 Quote it in a shell (``'heuristic[holding=false]'``): brackets are glob characters."""
 
 from __future__ import annotations

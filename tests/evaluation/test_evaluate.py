@@ -402,10 +402,20 @@ def test_agent_spec_carries_constructor_arguments():
     controller = make_controller("heuristic[holding=false,priority_margin_pct=2.5]")
     assert controller.holding is False and controller.priority_margin_pct == 2.5
     assert make_controller("heuristic").holding is True
+    # A value may be a spec with arguments of its own: the guard builds its fleet from it.
+    nested = "guard[fleet=heuristic[arrival_priority_pct=40,holding=true],samples=2]"
+    assert split_spec(nested) == ("guard", {
+        "fleet": "heuristic[arrival_priority_pct=40,holding=true]", "samples": 2})
+    guard = make_controller(nested)
+    assert guard.fleet.arrival_priority_pct == 40 and guard.samples == 2
+    guard.close()
     for bad, words in [("heuristic[holding]", "not key=value"),
                        ("heuristic[holding=false", "arguments look like"),
                        ("heuristic[no_such_arg=1]", "no_such_arg"),
-                       ("heuristic[x=[1,]", "arguments look like")]:
+                       ("heuristic[x=[1,]", "arguments look like"),
+                       ("guard[fleet=heuristic[holding=false]", "arguments look like"),
+                       ("heuristic[holding=false][x=1]", "arguments look like"),
+                       ("guard[fleet=heuristic[no_such_arg=1]]", "no_such_arg")]:
         with pytest.raises(AgentSpecError, match=re.escape(words)):
             make_controller(bad)
 
