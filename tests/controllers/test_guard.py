@@ -45,14 +45,12 @@ def _guarded_actions(env, guard, seed: int) -> list[int]:
     return actions
 
 
-def _dispatcher_day_to_a_choice(env, min_legal: int, from_step: int = 0):
-    """Day 0 of ``env`` flown by the dispatcher up to a decision, at step ``from_step`` or
-    later, of a vehicle on a port, on a charger or hovering with at least ``min_legal`` legal
-    actions: (the dispatcher, bound to the simulator; that decision's observation; its legal
-    actions)."""
+def _dispatcher_day_to_a_choice(env, min_legal: int):
+    """Day 0 of ``env`` flown by the dispatcher up to a decision of a vehicle on a port, on a
+    charger or hovering with at least ``min_legal`` legal actions: (the dispatcher, bound to
+    the simulator; that decision's observation; its legal actions)."""
     dispatcher, obs, _, legal = dispatcher_decision(env, lambda sim, obs, legal, choice: (
-        len(legal) >= min_legal and sim.step_count >= from_step
-        and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)))
+        len(legal) >= min_legal and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)))
     return dispatcher, obs, legal
 
 

@@ -7,8 +7,9 @@ import pytest
 from agents.controllers.guard import GuardedController
 from agents.controllers.planner import roll_out
 from agents.controllers.registry import make_controller
+from helpers import dispatcher_decision
 from marl_vertiport import vertiport_v1
-from tests.controllers.test_guard import _dispatcher_day_to_a_choice
+from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
 
 
 def _counted_by_hand(guard, sim, action: int, floor_pct: float) -> int:
@@ -45,7 +46,9 @@ def test_the_floor_counts_the_vehicles_that_fall_below_it_as_lost():
     start below it (counted only if lost) and others fall below it (counted); every legal
     action's count matches a rollout counted by hand, and without a floor only losses count."""
     env = vertiport_v1.env(config="paper")
-    _, _, legal = _dispatcher_day_to_a_choice(env, min_legal=2, from_step=300)
+    *_, legal = dispatcher_decision(env, lambda sim, obs, legal, choice: (
+        sim.step_count >= 300 and len(legal) >= 2
+        and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)))
     sim = env.unwrapped.sim
     live = sim.battery[~sim.lost]
     floor_pct = float(np.median(live)) + 0.5
