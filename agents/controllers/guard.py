@@ -45,6 +45,13 @@ fleet that far from a loss (and a check is quiet only if it keeps ``margin_pct``
 base other than ``fleet``, a quiet check hands the base the next ``quiet_min`` minutes unchecked;
 ``quiet_pct`` above 100 checks every decision that matters.
 
+``reward_margin`` lets the rollouts choose between the two controllers where they disagree: where
+the base's choice passes its check and ``fleet`` would choose otherwise, the fleet's choice is
+rolled out with the same draws, and it is taken if it loses no vehicle and its rollouts earn at
+least ``reward_margin`` more reward on average. Both are judged with ``fleet`` flying the fleet
+after them, so this is one step of policy improvement over ``fleet`` (a rollout algorithm) with
+the base's proposal as the only other candidate.
+
 ``self_check`` closes the rest of the gap: a base choice that passes the fleet's rollouts is
 rolled out ``samples`` more times with the base itself going on deciding (``fleet`` for the
 vehicles below ``defer_pct``), as it will once the choice is taken, and it stands only if none of
@@ -134,6 +141,10 @@ class GuardedController(ScratchRollouts, Controller):
         port_hops: whether a vehicle on a normal port may taxi to another normal port (default:
             yes); ``False`` hands such a choice of the base to ``fleet`` (``stay`` without
             one) and keeps the override from making it.
+        reward_margin: with a ``fleet`` of its own, where the base's choice passes its check and
+            the fleet's differs, the fleet's is taken if its rollouts (the same draws) lose no
+            vehicle and earn at least this much more reward on average (``None``, default:
+            never).
     """
 
     name = "guard"
@@ -146,7 +157,7 @@ class GuardedController(ScratchRollouts, Controller):
                  fleet: str | Any | None = None, defer_pct: float = 0.0,
                  margin_pct: float = 0.0, self_check: bool = False, min_saved: float = 0.0,
                  override_takeoff: bool = True, floor_pct: float = 0.0,
-                 port_hops: bool = True) -> None:
+                 port_hops: bool = True, reward_margin: float | None = None) -> None:
         if horizon_min <= 0:
             raise ValueError(f"horizon_min must be > 0 minutes, got {horizon_min}")
         if samples < 1:
@@ -173,6 +184,10 @@ class GuardedController(ScratchRollouts, Controller):
             if pct > 0 and fleet is None:
                 raise ValueError(f"{name} hands decisions to fleet: it needs a fleet of its "
                                  f"own (e.g. guard[base=gcn,fleet=heuristic,{name}=30])")
+        if reward_margin is not None and fleet is None:
+            raise ValueError("reward_margin weighs the base's choice against fleet's: it needs a "
+                             "fleet of its own (e.g. guard[base=gcn,fleet=heuristic,"
+                             "reward_margin=0])")
         if self_check and fleet is None:
             raise ValueError("self_check rolls the base out beside fleet: it needs a fleet of "
                              "its own (e.g. guard[base=gcn,fleet=heuristic,self_check=true])")
@@ -200,6 +215,10 @@ class GuardedController(ScratchRollouts, Controller):
         self.override_takeoff = bool(override_takeoff)
         self.floor_pct = float(floor_pct)
         self.port_hops = bool(port_hops)
+        self.reward_margin = None if reward_margin is None else float(reward_margin)
+        #: This episode's decisions where the fleet's choice earned more in the rollouts
+        #: (``reward_margin``) and was taken.
+        self.contests_won = 0
         self.clairvoyant = bool(clairvoyant)
         self.prefer = prefer
         self.defer_pct = float(defer_pct)
@@ -232,7 +251,7 @@ class GuardedController(ScratchRollouts, Controller):
         self._episode_seed = 0 if seed is None else int(seed)
         self._quiet_until_step = -1
         self.last_values = {}
-        self.checks = self.changes = self.deferrals = 0
+        self.checks = self.changes = self.deferrals = self.contests_won = 0
         self.last_changed = self.last_deferred = False
         for policy in self._policies():
             if hasattr(policy, "reset"):
@@ -350,6 +369,24 @@ class GuardedController(ScratchRollouts, Controller):
         self.deferrals += 1
         return int(self.fleet.act(observation))
 
+    def _contest(self, sim: VertiportSim, observation: dict, choice: int,
+                 first: dict[int, tuple[float, float, float]], least: float
+                 ) -> tuple[int, dict[int, tuple[float, float, float]], float]:
+        """``reward_margin``: the base's clean ``choice`` (its rollout values ``first``, the least
+        charge ``least``) against the fleet's own choice, rolled out with the same draws; the
+        fleet's, with its values and least charge, where it loses no vehicle and earns at least
+        ``reward_margin`` more, else the base's unchanged."""
+        own = int(self.fleet.act(observation))
+        if own == choice or own in self._hops(sim, sim.acting):
+            return choice, first, least
+        theirs, their_least = self.evaluate(sim, [own], stop_at_loss=True)
+        if theirs[own][0] > 0 or theirs[own][1] < first[choice][1] + self.reward_margin:
+            return choice, first, least
+        self.last_deferred = True
+        self.deferrals += 1
+        self.contests_won += 1
+        return own, theirs, their_least
+
     def _hops(self, sim: VertiportSim, v: int) -> set[int]:
         """The actions that taxi vehicle ``v`` from a normal port to another normal port, where
         ``port_hops`` rules them out (empty otherwise)."""
@@ -399,6 +436,8 @@ class GuardedController(ScratchRollouts, Controller):
                 if own != choice:
                     choice = own
                     first, least = self.evaluate(sim, [choice], stop_at_loss=True)
+        if first[choice][0] == 0 and self.reward_margin is not None and not self.last_deferred:
+            choice, first, least = self._contest(sim, observation, choice, first, least)
         if first[choice][0] == 0:
             if least >= max(self.quiet_pct, self.margin_pct):
                 self._quiet_until_step = sim.step_count + int(

@@ -176,3 +176,54 @@ def test_without_port_hops_no_override_taxis_between_normal_ports():
         assert (hop in asked[1]) == port_hops
         guard.close()
     env.close()
+
+
+class _Fixed(DispatcherController):
+    """Always the action ``action`` (set on the instance)."""
+
+    def act(self, observation):
+        return self.action
+
+
+@pytest.mark.parametrize("fleet_values, reward_margin, fleet_taken", [
+    ((0.0, 60.0, 30.0), 0.0, True),    # loses none, earns more
+    ((0.0, 60.0, 30.0), 20.0, False),  # but not by the margin
+    ((0.0, 40.0, 30.0), 0.0, False),   # earns less
+    ((0.5, 90.0, 30.0), 0.0, False),   # earns more, but loses a vehicle
+])
+def test_reward_margin_takes_the_fleets_choice_where_its_rollouts_earn_more(
+        fleet_values, reward_margin, fleet_taken):
+    """A base that takes off where the dispatcher (the fleet) does not: its take-off passes the
+    check, earning 50; the dispatcher's choice is rolled out after it and taken only where it
+    loses no vehicle and earns ``reward_margin`` more."""
+    env = vertiport_v1.env(config="paper")
+    obs, choice, _ = _decision_with_a_takeoff(env)
+    sim = env.unwrapped.sim
+    base = _Fixed()
+    base.action = takeoff = sim.actions.takeoff
+    guard = GuardedController(base=base, fleet="heuristic", nominal=True,
+                              reward_margin=reward_margin)
+    guard.reset(seed=0)
+    guard.bind(sim)
+    asked = _crafted(guard, {takeoff: (0.0, 50.0, 30.0), choice: fleet_values})
+    assert guard.act(obs) == (choice if fleet_taken else takeoff)
+    assert asked == [[takeoff], [choice]]
+    assert guard.contests_won == guard.deferrals == int(fleet_taken)
+    assert guard.last_deferred == fleet_taken and guard.changes == 0
+    guard.close()
+    env.close()
+
+
+def test_reward_margin_rolls_out_nothing_more_where_the_two_agree_and_needs_a_fleet():
+    with pytest.raises(ValueError, match="reward_margin .* needs a fleet"):
+        GuardedController(reward_margin=0.0)
+    assert make_controller("handback[reward_margin=5]").reward_margin == 5.0
+    env = vertiport_v1.env(config="paper")
+    obs, choice, _ = _decision_with_a_takeoff(env)
+    guard = GuardedController(fleet="heuristic", nominal=True, reward_margin=0.0)
+    guard.reset(seed=0)
+    guard.bind(env.unwrapped.sim)
+    asked = _crafted(guard, {choice: (0.0, 50.0, 30.0)})
+    assert guard.act(obs) == choice and asked == [[choice]] and guard.contests_won == 0
+    guard.close()
+    env.close()
