@@ -436,9 +436,9 @@ class GuardedController(ScratchRollouts, Controller):
                 if own != choice:
                     choice = own
                     first, least = self.evaluate(sim, [choice], stop_at_loss=True)
-        if first[choice][0] == 0 and self.reward_margin is not None and not self.last_deferred:
-            choice, first, least = self._contest(sim, observation, choice, first, least)
         if first[choice][0] == 0:
+            if self.reward_margin is not None and not self.last_deferred:
+                choice, first, least = self._contest(sim, observation, choice, first, least)
             if least >= max(self.quiet_pct, self.margin_pct):
                 self._quiet_until_step = sim.step_count + int(
                     round(self.quiet_min / sim.cfg.schedule.minutes_per_step))
