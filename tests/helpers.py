@@ -89,6 +89,16 @@ def small_actor(hidden: int = 16, hidden_dims: tuple[int, ...] = (32,)):
                       feature_names("observation"), hidden=hidden, hidden_dims=list(hidden_dims))
 
 
+class FixedAction:
+    """A controller that always takes ``action``."""
+
+    def __init__(self, action: int) -> None:
+        self.action = action
+
+    def act(self, observation: dict) -> int:
+        return self.action
+
+
 def dispatcher_decision(env, found, seeds=(0,)):
     """The first decision at which ``found(sim, obs, legal, choice)`` holds, on days ``seeds``
     (in order) of the AEC ``env`` flown by the dispatcher, with the day played up to it:

@@ -9,7 +9,7 @@ from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.episode import run_episode
 from agents.controllers.guard import GuardedController
 from agents.controllers.registry import make_controller
-from helpers import dispatcher_decision
+from helpers import FixedAction, dispatcher_decision
 from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
@@ -298,16 +298,6 @@ def test_defer_pct_hands_the_low_vehicles_to_the_fleet():
     env.close()
 
 
-class _Fixed:
-    """A controller that always takes ``action``."""
-
-    def __init__(self, action: int) -> None:
-        self.action = action
-
-    def act(self, observation: dict) -> int:
-        return self.action
-
-
 @pytest.mark.parametrize("margin_pct, base_stands", [(5.0, True), (25.0, False)])
 def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands):
     """A base choice whose rollouts keep every vehicle at 10 % stands under a 5 % margin; under
@@ -317,7 +307,7 @@ def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands)
     fleet, obs, legal = _dispatcher_day_to_a_choice(env, 2)
     own = fleet.act(obs)
     other = next(a for a in legal if a != own)
-    guard = GuardedController(base=_Fixed(other), fleet=fleet, nominal=True,
+    guard = GuardedController(base=FixedAction(other), fleet=fleet, nominal=True,
                               margin_pct=margin_pct)
     guard.reset(seed=0)
     guard.bind(sim)
@@ -354,7 +344,7 @@ def test_self_check_hands_a_choice_the_base_itself_would_lose_to_the_fleet():
     own = fleet.act(obs)
     other = next(a for a in legal if a != own)
     for onward_loses in (False, True):
-        guard = GuardedController(base=_Fixed(other), fleet=fleet, nominal=True,
+        guard = GuardedController(base=FixedAction(other), fleet=fleet, nominal=True,
                                   self_check=True)
         guard.reset(seed=0)
         guard.bind(sim)
@@ -381,7 +371,7 @@ def test_self_check_hands_a_choice_the_base_itself_would_lose_to_the_fleet():
 
 def test_the_self_checks_continuation_is_the_base_above_defer_pct_and_the_fleet_below():
     env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 120})
-    base, fleet = _Fixed(0), DispatcherController()
+    base, fleet = FixedAction(0), DispatcherController()
     guard = GuardedController(base=base, fleet=fleet, nominal=True, defer_pct=50,
                               self_check=True)
     env.reset(seed=0)

@@ -9,7 +9,7 @@ import pytest
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.guard import GuardedController
 from agents.controllers.registry import make_controller
-from helpers import dispatcher_decision
+from helpers import FixedAction, dispatcher_decision
 from marl_vertiport import vertiport_v1
 from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
 
@@ -97,12 +97,7 @@ def test_without_override_takeoff_the_base_may_still_take_off():
     obs, _, legal = _decision_with_a_takeoff(env)
     sim = env.unwrapped.sim
     takeoff = sim.actions.takeoff
-
-    class _TakesOff(DispatcherController):
-        def act(self, observation):
-            return takeoff
-
-    guard = GuardedController(base=_TakesOff(), nominal=True, override_takeoff=False)
+    guard = GuardedController(base=FixedAction(takeoff), nominal=True, override_takeoff=False)
     guard.reset(seed=0)
     guard.bind(sim)
     asked = _crafted(guard, {a: (1.0, 0.0, 20.0) for a in legal})
@@ -178,13 +173,6 @@ def test_without_port_hops_no_override_taxis_between_normal_ports():
     env.close()
 
 
-class _Fixed(DispatcherController):
-    """Always the action ``action`` (set on the instance)."""
-
-    def act(self, observation):
-        return self.action
-
-
 @pytest.mark.parametrize("fleet_values, reward_margin, fleet_taken", [
     ((0.0, 60.0, 30.0), 0.0, True),    # loses none, earns more
     ((0.0, 60.0, 30.0), 20.0, False),  # but not by the margin
@@ -199,9 +187,8 @@ def test_reward_margin_takes_the_fleets_choice_where_its_rollouts_earn_more(
     env = vertiport_v1.env(config="paper")
     obs, choice, _ = _decision_with_a_takeoff(env)
     sim = env.unwrapped.sim
-    base = _Fixed()
-    base.action = takeoff = sim.actions.takeoff
-    guard = GuardedController(base=base, fleet="heuristic", nominal=True,
+    takeoff = sim.actions.takeoff
+    guard = GuardedController(base=FixedAction(takeoff), fleet="heuristic", nominal=True,
                               reward_margin=reward_margin)
     guard.reset(seed=0)
     guard.bind(sim)
