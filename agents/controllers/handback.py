@@ -9,7 +9,11 @@ back to it (docs/controllers.md, docs/training.md, "Handing decisions back"):
 * ``margin_pct=25``: the policy's choice stands only if none of its rollouts (the dispatcher
   flying the fleet for two hours, with the config's gusts and failures) loses a vehicle or lets a
   live vehicle's charge fall below 25 %; otherwise the dispatcher's choice is checked and taken;
-* ``quiet_pct=101``: every decision with a choice is checked.
+* ``quiet_pct=101``: every decision with a choice is checked;
+* ``reward_margin=10``: where the policy's choice passes its check but the dispatcher disagrees,
+  the dispatcher's choice is rolled out with the same draws and taken if it loses no vehicle and
+  earns at least 10 more reward on average (chosen on validation days 800 260 to 800 299 at 10 %
+  uncertainty; docs/training.md, "Letting the rollouts choose").
 
 ``self_check`` (off) would also roll the policy itself out; on the validation days the settings
 were chosen on it lost as many vehicles and cost twice the time (docs/training.md).
@@ -26,10 +30,10 @@ from typing import Any
 
 from agents.controllers.guard import GuardedController
 
-#: The settings that make the guard the handed-back learned ATC (chosen on validation days
-#: 800 060 to 800 079; docs/training.md).
+#: The settings that make the guard the handed-back learned ATC (chosen on validation days:
+#: the first four on 800 060 to 800 079, ``reward_margin`` on 800 260 to 800 299; docs/training.md).
 HANDBACK_SETTINGS = {"fleet": "heuristic", "defer_pct": 30.0, "margin_pct": 25.0,
-                     "quiet_pct": 101.0}
+                     "quiet_pct": 101.0, "reward_margin": 10.0}
 
 
 class HandbackController(GuardedController):
