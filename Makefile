@@ -27,7 +27,7 @@ ITERATIONS ?=
 # uncertainty, which it sets itself).
 SAFETY_LAYOUTS ?= paper small twin wide mid large fleet40_overloaded
 # The test days per case `make bar` plays: the first BAR_DAYS of the 200 of docs/results.md
-# (handback looks ahead on every contested decision: about 20 s a day on one core).
+# (handback looks ahead on every contested decision: 10 to 80 s a day on one core).
 BAR_DAYS ?= 100
 
 # Where `evaluate`, `sweep` and `train` run their tasks: BACKEND=ray (Ray reads RAY_ADDRESS,
@@ -104,7 +104,7 @@ results: $(STAMP)  ## regenerate every shipped result of the shipped policy but 
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
 
-bar: $(STAMP)  ## the learned ATC against the bar: handback on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 91 minutes on a 2-core Intel Xeon shared with other jobs for part of the run)
+bar: $(STAMP)  ## the learned ATC against the bar: handback on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 126 minutes on a 2-core Intel Xeon)
 	$(CLI) evaluate --agents handback --configs paper paper_uncertain paper_uncertain_10 --episodes $(BAR_DAYS) --out docs/results/bar --report docs/results/bar.md $(RUN_ON)
 	for base in heuristic gcn rollout; do $(PY) -m agents.evaluate.paired docs/results/episodes.csv docs/results/bar/episodes.csv --pair $$base handback --csv docs/results/bar/paired_$$base.csv || exit 1; echo; done > docs/results/bar_paired.md
 
