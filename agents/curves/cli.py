@@ -17,8 +17,13 @@ are the train configs' ``seed``: a run is reproducible from its config and seed.
 play validation days (never test days). Outputs in ``--out`` (default
 ``runs/curves/<configs>``): ``curves.csv`` (one row per config, seed and iteration),
 ``summary.csv``, ``baselines.csv``, ``curves.png`` and ``curves.json`` (configs, seeds, run
-folders, wall times). Exit codes: 0 done, 1 a run failed (the finished runs are written,
-marked incomplete), 2 bad input (nothing is run), 130 Ctrl-C (as for 1).
+folders, wall times). With ``--resume`` a run whose folder in ``--out`` already holds a checkpoint
+of the same config goes on from its last checkpoint (``--iterations`` may extend a finished
+run), so that a long budget can be trained over several sittings; the others start afresh.
+A resumed run's later iterations are not bit for bit those of an unbroken run (its env copies
+start new days), and its wall time in ``curves.json`` is that of the last sitting (each
+iteration's own speed is in ``curves.csv``). Exit codes: 0 done, 1 a run failed (the finished
+runs are written, marked incomplete), 2 bad input (nothing is run), 130 Ctrl-C (as for 1).
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ from typing import Sequence
 
 from agents.common.provenance import provenance
 from agents.curves.outputs import CURVE_METRICS, CurvesResult, final_rows, summary_rows, write_outputs
-from agents.curves.runs import SeedTask, baseline_seeds, train_seed
+from agents.curves.runs import SeedTask, baseline_seeds, resumable, train_seed
 from agents.execution import INTERRUPTED, BackendError, add_backend_arguments, backend_from_args
 from marl_vertiport.config import ConfigError, build_dataclass, to_dict
 
@@ -59,6 +64,9 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
                              "(default 2)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="output folder (default: runs/curves/<configs>)")
+    parser.add_argument("--resume", action="store_true",
+                        help="go on with the runs already in --out from their last checkpoint "
+                             "(the same config; --iterations may extend them)")
     add_backend_arguments(parser)
     return parser
 
@@ -135,6 +143,13 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
 
         for agent in args.baselines:
             check_agent(agent)
+        tasks = []
+        for label in labels:
+            for seed in seeds:
+                run_dir = out / "runs" / f"{label}_seed{seed}"
+                config = {**configs[label], "seed": seed}
+                resume = args.resume and resumable(run_dir, config)
+                tasks.append(SeedTask(label, config, str(run_dir), resume))
         backend = backend_from_args(args, args.workers)
     except (ConfigError, BackendError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -142,12 +157,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
 
     result = CurvesResult(labels=labels, configs=configs, seeds=seeds, backend=backend.describe(),
                           provenance=provenance(args.baselines if args.baseline_episodes else ()))
-    tasks = []
-    for label in labels:
-        for seed in seeds:
-            run_dir = out / "runs" / f"{label}_seed{seed}"
-            result.run_dirs[(label, seed)] = str(run_dir)
-            tasks.append(SeedTask(label, {**configs[label], "seed": seed}, str(run_dir)))
+    for task in tasks:
+        result.run_dirs[(task.label, task.seed)] = task.run_dir
     start = time.perf_counter()
 
     def on_result(i: int, run: dict) -> bool:
@@ -162,6 +173,9 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     try:
         print(f"{len(tasks)} training runs ({', '.join(labels)} x seeds {seeds[0]}..{seeds[-1]}) on "
               f"{backend.describe()}; each run's folder: {out}/runs/", flush=True)
+        for task in tasks:
+            if task.resume:
+                print(f"resuming {task.label} seed {task.seed} from {task.run_dir}", flush=True)
         result.error = backend.run(train_seed, tasks, on_result)
         if result.error is None and args.baselines and args.baseline_episodes:
             run_baselines(result, args.baselines, args.baseline_episodes, backend)

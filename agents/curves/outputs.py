@@ -202,6 +202,7 @@ def curves_json(result: CurvesResult, command: str) -> str:
         "configs": {label: result.configs[label] for label in result.labels},
         "runs": [{"config": label, "seed": seed, "run_dir": result.run_dirs.get((label, seed)),
                   "seconds": result.runs[(label, seed)]["seconds"],
+                  "resumed_at": result.runs[(label, seed)].get("resumed_at"),
                   "checkpoint": result.runs[(label, seed)]["checkpoint"]}
                  for label in result.labels for seed in result.seeds
                  if (label, seed) in result.runs],

@@ -87,3 +87,46 @@ def test_baseline_lines_say_which_days_scored_them():
     assert baseline_label(base, (900000, 900010)).endswith(
         "(paper, wide, validation days 900000-900009)")
     assert "validation" not in baseline_label(base, None)
+
+
+def _numbers(path):
+    with open(path) as fh:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+
+def test_resume_goes_on_from_the_last_checkpoint_and_may_extend_the_budget(tmp_path, capsys):
+    train = _write_configs(tmp_path)
+    out = tmp_path / "out"
+    base = ["--configs", str(train), "--workers", "1", "--baseline-episodes", "0", "--out", str(out)]
+    assert main([*base, "--seeds", "1", "--iterations", "2"]) == 0, capsys.readouterr().err
+    first = _numbers(out / "runs" / "tiny_seed0" / "curves.csv")
+    # Seed 0 is extended from 2 to 3 iterations; seed 1, with no folder yet, starts afresh.
+    assert main([*base, "--seeds", "2", "--iterations", "3", "--resume"]) == 0, capsys.readouterr().err
+    printed = capsys.readouterr().out
+    assert "resuming tiny seed 0" in printed and "resuming tiny seed 1" not in printed
+    with open(out / "curves.csv") as fh:
+        rows = [(r["seed"], r["iteration"]) for r in csv.DictReader(fh)]
+    assert rows == [("0", "0"), ("0", "1"), ("0", "2"), ("1", "0"), ("1", "1"), ("1", "2")]
+    again = _numbers(out / "runs" / "tiny_seed0" / "curves.csv")
+    assert len(first) == 2 and again[:2] == first  # the iterations trained before are kept
+    assert (out / "runs" / "tiny_seed0" / "model_2.pt").exists()
+    assert "iterations: 3" in (out / "runs" / "tiny_seed0" / "train_config.yaml").read_text()
+    meta = json.loads((out / "curves.json").read_text())
+    assert [(r["seed"], r["resumed_at"]) for r in meta["runs"]] == [(0, 2), (1, None)]
+
+
+def test_resume_refuses_a_run_of_another_config_or_a_shorter_budget(tmp_path, capsys):
+    train = _write_configs(tmp_path)
+    out = tmp_path / "out"
+    base = ["--configs", str(train), "--seeds", "1", "--workers", "1", "--baseline-episodes", "0",
+            "--out", str(out)]
+    assert main([*base, "--iterations", "2"]) == 0, capsys.readouterr().err
+    saved = (out / "runs" / "tiny_seed0" / "curves.csv").read_text()
+    assert main([*base, "--iterations", "1", "--resume"]) == 2
+    assert "would cut it short" in capsys.readouterr().err
+    other = tmp_path / "tiny.yaml"
+    other.write_text(other.read_text().replace("reward_scale: 0.05", "reward_scale: 0.1"))
+    assert main([*base, "--iterations", "2", "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "started with another config" in err and "reward_scale" in err
+    assert (out / "runs" / "tiny_seed0" / "curves.csv").read_text() == saved  # nothing touched
