@@ -65,7 +65,7 @@ def roll_out(scratch: VertiportSim, builder: ObservationBuilder, base: Controlle
     single = scratch.single_legal_action if getattr(base, "pure_act", False) else _none
     scratch.restore(snap)
     if rng is not None:
-        scratch.rng = rng
+        scratch.use_generator(rng)
     total, _ = scratch.step(action)
     if watch is not None:
         watch(scratch)

@@ -192,6 +192,11 @@ class UncertaintyConfig:
     """Standard deviation of that error (paper draft: 1 m); 0 with mean 0 disables it."""
     action_misread_prob: float = 0.0
     """Chance that the commanded action is replaced by another legal one (paper draft: 0.05)."""
+    common_random_numbers: bool = False
+    """True: every draw after the day's first state comes from a stream keyed by what it is for
+    (a vehicle's k-th trip or take-off, a step's gusts and charger failures), so every
+    controller on the same seed meets the same luck; False: one stream, in the order the day's
+    decisions call for draws (every shipped result)."""
 
 
 @dataclass(frozen=True)

@@ -53,7 +53,7 @@ from marl_vertiport.sim.schema import (
 from marl_vertiport.sim.separation import Separation
 from marl_vertiport.sim.stranding import Stranding
 from marl_vertiport.sim.trailing import Trailing
-from marl_vertiport.sim.uncertainty import Uncertainty
+from marl_vertiport.sim.uncertainty import KeyedDraws, Uncertainty, twin_generator
 
 __all__ = ["IllegalActionError", "VertiportSim"]
 
@@ -82,10 +82,7 @@ def _copied(value: Any) -> Any:
     if kind is EpisodeMetrics:
         return value.copy()
     if kind is np.random.Generator:  # the same state, so the same draws from here on
-        bits = value.bit_generator
-        twin = np.random.Generator(type(bits)(0))
-        twin.bit_generator.state = bits.state
-        return twin
+        return twin_generator(value)
     return copy.deepcopy(value)
 
 
@@ -155,6 +152,8 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         # which snapshot() copies.
         self._static_keys = frozenset(self.__dict__) | {"_static_keys"}
         self.rng = np.random.default_rng(0)
+        #: The keyed streams of ``uncertainty.common_random_numbers`` (None without).
+        self.draws: KeyedDraws | None = None
         self._allocate()
 
     # ================================================================== episode state
@@ -252,6 +251,9 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
                                       min_separation_m=self._initial_separation_m())
         self.acting = 0
         self._choose_actor(first=True)
+        self.draws = (KeyedDraws.from_generator(rng, n, len(self._charging_node_list),
+                                                self.uncertainty.noisy_observations)
+                      if cfg.uncertainty.common_random_numbers else None)
         self._draw_observation_noise()
         self._mask_cache: dict[int, np.ndarray] = {}
         self._evtol_cache: np.ndarray | None = None
@@ -313,11 +315,14 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
             self._check_memo()
         v = self.acting
         a = self.check_action(v, action)
-        cfg, rng, acts = self.cfg, self.rng, self.actions
+        cfg, rng, acts, draws = self.cfg, self.rng, self.actions, self.draws
         un = cfg.uncertainty
+        if draws is not None:
+            draws.begin_step()
         commanded = a
         if un.action_misread_prob > 0:
-            a = self.uncertainty.misread(rng, a, self.action_mask(v))
+            a = self.uncertainty.misread(rng, a, self.action_mask(v),
+                                         None if draws is None else draws.misread_u)
         metrics = self.metrics
         info: dict[str, Any] = {
             "minute": self.minute, "acting_agent": self._agent_names[v], "action": a,
@@ -334,7 +339,7 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         tau = gamma = 0.0
         now = self.minute
         if a == acts.takeoff:
-            if self.uncertainty.takeoff_fails(rng):
+            if self.uncertainty.takeoff_fails(rng if draws is None else draws.takeoffs[v]):
                 info["takeoff_failed"] = True
                 metrics.failed_takeoffs += 1
             else:
@@ -381,7 +386,8 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         if self._waiting_outside:
             for w in sorted(self._waiting_outside):
                 self._head_for_slot(w)
-        failed_nodes = self.uncertainty.failed_chargers(rng, self._charging_node_list)
+        failed_nodes = self.uncertainty.failed_chargers(
+            rng, self._charging_node_list, None if draws is None else draws.charger_u)
         info["charger_failures"] = len(failed_nodes)
         lost_before = self.metrics.stranded_air + self.metrics.stranded_ground
         info["battery_depletions"] = self._update_battery(status_during, failed_nodes)
@@ -433,7 +439,17 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
                                                  self.pending_kind.tolist(), self._rel_min)
 
     def _draw_observation_noise(self) -> None:
-        self.obs_xy = self.uncertainty.observed_xy(self.rng, self.pos[:, :2])
+        draws = self.draws
+        self.obs_xy = self.uncertainty.observed_xy(self.rng, self.pos[:, :2],
+                                                   None if draws is None else draws.noise_z)
+
+    def use_generator(self, rng: np.random.Generator) -> None:
+        """Draw the rest of the day from ``rng`` (a look-ahead's own future after
+        :meth:`restore`); with ``common_random_numbers``, from streams keyed by one draw of it."""
+        self.rng = rng
+        if self.draws is not None:
+            self.draws = KeyedDraws.from_generator(rng, self.n, len(self._charging_node_list),
+                                                   self.uncertainty.noisy_observations)
 
     def close(self) -> None:
         self.physics.close()

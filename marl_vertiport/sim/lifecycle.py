@@ -115,9 +115,10 @@ class Lifecycle:
             if self.landing_cleared[v]:
                 self.landing_cleared[v] = False
                 self.pending_kind[v] = PENDING_TAKEOFF
+                trips = self.rng if self.draws is None else self.draws.trips[v]
                 self.pending_time[v] = self.schedule.takeoff_after_landing_min(
-                    self.rng, self.minute + self.minutes_per_step)
-                self.dest[v] = int(self.rng.integers(len(lay.destination_xy_m)))
+                    trips, self.minute + self.minutes_per_step)
+                self.dest[v] = int(trips.integers(len(lay.destination_xy_m)))
                 self.metrics.completed_trips += 1
                 self._trip_ends.append(v)  # its landing reserve is read after the step's drain
                 return 1

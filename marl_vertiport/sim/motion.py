@@ -44,7 +44,10 @@ class Motion:
         if not moving:
             return 0, start
         dt, step_len, park_z = self.dt_s, self.step_len_m, self.park_z_m
-        keep, n_gusts = self.uncertainty.gust_factors(self.rng, len(moving))
+        draws = self.draws
+        keep, n_gusts = self.uncertainty.gust_factors(
+            self.rng, len(moving),
+            None if draws is None else (draws.gust_hit_u[moving], draws.gust_loss_u[moving]))
         targets = self.target.tolist()
         pos, cmd_vel = self.pos, self.cmd_vel
         radius = self.layout.airspace_radius_m
