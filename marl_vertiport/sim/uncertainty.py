@@ -67,7 +67,7 @@ class Uncertainty:
         if p <= 0:
             return []
         draws = (rng.random(len(charging_nodes)) if u is None else u).tolist()
-        return [node for node, u in zip(charging_nodes, draws) if u < p]
+        return [node for node, draw in zip(charging_nodes, draws) if draw < p]
 
     def gust_factors(self, rng: np.random.Generator, count: int,
                      u: tuple[np.ndarray, np.ndarray] | None = None
