@@ -83,7 +83,7 @@ check-train-margin: $(STAMP)  ## measure M of check-train: train seeds 0, 1 and 
 	for seed in 0 1 2; do $(CLI) train --config default --seed $$seed --no-eval --run-dir runs/check-train-margin/seed$$seed $(RUN_ON) || exit 1; done
 	$(CLI) check-train --margin runs/check-train-margin/seed0 runs/check-train-margin/seed1 runs/check-train-margin/seed2 --out runs/check-train-margin/margin $(RUN_ON)
 
-curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), ITERATIONS to override their budget, RESUME=1 to go on with the runs already in runs/curves/ (a long budget over several sittings), 95 % intervals over seeds, baselines as lines (runs/curves/; two seeds run at a time; one seed of scratch took 18 minutes on a 2-core Intel Xeon beside one other job)
+curves: $(STAMP)  ## learning curves: SEEDS training seeds (3) of each train config in CURVES (scratch), ITERATIONS to override their budget, RESUME=1 to go on with the runs already in runs/curves/ (a long budget over several sittings), 95 % intervals over seeds, baselines as lines (runs/curves/; two seeds run at a time; one seed of scratch, 540 iterations, took 18 minutes on a 2-core Intel Xeon beside one other job; 3 100 iterations took 2.4 CPU-hours a seed on a 2-core AMD EPYC)
 	$(CLI) curves --configs $(CURVES) --seeds $(SEEDS) $(if $(ITERATIONS),--iterations $(ITERATIONS)) $(if $(RESUME),--resume) $(RUN_ON)
 
 evaluate: $(STAMP)  ## evaluate AGENTS on CONFIGS (default: both cases), EPISODES per case, into OUT (runs/eval); SUITE=transfer: a suite of configs/suites/ with its report (EPISODES=N: its first N days); then each controller's worst day rendered with its decision log into OUT/worst_day (WORST_DAY=0: not)

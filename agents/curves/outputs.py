@@ -3,9 +3,9 @@
 * ``curves.csv``: tidy, one row per (config, seed, PPO iteration): environment steps and every
   column of the run's ``curves.csv`` (the episode metrics are empty in iterations in which no
   training day ended);
-* ``summary.csv``: per config, iteration and metric, over the seeds that finished a day in that
-  iteration: the mean and the interquartile mean (IQM), each with a 95 % percentile-bootstrap
-  interval over seeds;
+* ``summary.csv``: per config, metric and iteration at which a seed finished a day, over the
+  seeds (each at its latest finished day, see :func:`summary_rows`): the mean and the
+  interquartile mean (IQM), each with a 95 % percentile-bootstrap interval over seeds;
 * ``baselines.csv``: each baseline's mean and 95 % bootstrap CI on the validation days of each
   scenario the configs train on;
 * ``curves.png``: the paper's total reward, vehicles lost and unresolved conflicts per day
@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 from dataclasses import dataclass, field
@@ -108,31 +109,55 @@ def curves_csv(result: CurvesResult) -> str:
 
 
 def summary_rows(result: CurvesResult, resamples: int = BOOTSTRAP_RESAMPLES) -> list[dict[str, Any]]:
-    """Per config, iteration and curve metric, over the seeds with a finished day there."""
+    """Per config, curve metric and iteration at which any seed finished a training day: each
+    seed's latest finished day at or before that iteration, over the seeds that finished a day
+    by then and whose run trained that iteration.
+
+    Runs that were never broken finish their days on the same iterations, so this is each
+    iteration's own days. A resumed run restarts its env copies, so its days end on other
+    iterations than an unbroken seed's; its value is then the day it finished last (less than
+    one day's iterations earlier), never a gap that would leave a point with fewer seeds."""
     rows = []
     for label in result.labels:
-        by_iteration: dict[int, dict[str, Any]] = {}
+        steps: dict[int, int] = {}
+        # Per metric, each seed's (last iteration its run trained, its sorted (iteration, value)).
+        days: dict[str, list[tuple[int, list[tuple[int, float]]]]] = {
+            m: [] for m, _ in CURVE_METRICS}
         for seed in result.seeds:
+            per_metric: dict[str, list[tuple[int, float]]] = {m: [] for m, _ in CURVE_METRICS}
+            trained = -1
             for row in result.runs.get((label, seed), {}).get("rows", []):
-                entry = by_iteration.setdefault(int(row["iteration"]),
-                                                {"env_steps": int(row["env_steps"]), "values": {}})
+                it = int(row["iteration"])
+                trained = max(trained, it)
                 for metric, _ in CURVE_METRICS:
                     v = float(row.get(metric, math.nan))
                     if math.isfinite(v):
-                        entry["values"].setdefault(metric, []).append(v)
-        for it in sorted(by_iteration):
-            entry = by_iteration[it]
+                        per_metric[metric].append((it, v))
+                        steps.setdefault(it, int(row["env_steps"]))
             for metric, _ in CURVE_METRICS:
-                values = entry["values"].get(metric)
+                if per_metric[metric]:
+                    days[metric].append((trained, sorted(per_metric[metric])))
+        grid = sorted(steps)
+        for it in grid:
+            for metric, _ in CURVE_METRICS:
+                values = [_as_of(seed_days, it) for trained, seed_days in days[metric]
+                          if seed_days[0][0] <= it <= trained]
                 if not values:
                     continue
                 low, high = bootstrap_ci(values, resamples)
                 ilow, ihigh = iqm_ci(values, resamples)
-                rows.append({"config": label, "iteration": it, "env_steps": entry["env_steps"],
+                rows.append({"config": label, "iteration": it, "env_steps": steps[it],
                              "metric": metric, "seeds": len(values),
                              "mean": float(np.mean(values)), "ci_low": low, "ci_high": high,
                              "iqm": iqm(np.array(values)), "iqm_low": ilow, "iqm_high": ihigh})
     return rows
+
+
+def _as_of(seed_days: list[tuple[int, float]], iteration: int) -> float:
+    """The value of the last of ``seed_days`` (sorted ``(iteration, value)``) at or before
+    ``iteration``."""
+    k = bisect.bisect_right(seed_days, (iteration, math.inf)) - 1
+    return seed_days[k][1]
 
 
 def final_rows(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -130,3 +130,29 @@ def test_resume_refuses_a_run_of_another_config_or_a_shorter_budget(tmp_path, ca
     err = capsys.readouterr().err
     assert "started with another config" in err and "reward_scale" in err
     assert (out / "runs" / "tiny_seed0" / "curves.csv").read_text() == saved  # nothing touched
+
+
+def test_summary_aligns_seeds_whose_days_end_on_other_iterations():
+    """A resumed seed's days end on other iterations: each point still counts every seed, at
+    its latest finished day, and a seed counts only up to the last iteration its run trained."""
+    from agents.curves.outputs import CurvesResult, summary_rows
+
+    def run(days, trained):
+        rows = {it: {"iteration": it, "env_steps": 10 * (it + 1)} for it in range(trained + 1)}
+        for it, v in days:
+            rows[it].update(total_reward=v, stranded=0.0, collisions=0.0)
+        return {"rows": list(rows.values())}
+
+    result = CurvesResult(labels=["a"], configs={"a": {}}, seeds=[0, 1, 2])
+    result.runs[("a", 0)] = run([(2, 1.0), (5, 2.0), (8, 3.0)], trained=9)
+    result.runs[("a", 1)] = run([(2, 10.0), (6, 20.0), (9, 30.0)], trained=9)
+    result.runs[("a", 2)] = run([(2, 100.0), (5, 200.0)], trained=5)  # stopped early
+    rows = {r["iteration"]: r for r in summary_rows(result, resamples=50)
+            if r["metric"] == "total_reward"}
+    assert sorted(rows) == [2, 5, 6, 8, 9]
+    assert [rows[i]["seeds"] for i in (2, 5, 6, 8, 9)] == [3, 3, 2, 2, 2]
+    assert rows[2]["mean"] == pytest.approx(37.0)
+    assert rows[5]["mean"] == pytest.approx((2.0 + 10.0 + 200.0) / 3)  # seed 1 as of iteration 2
+    assert rows[6]["mean"] == pytest.approx(11.0)  # seed 2 trained no iteration after 5
+    assert rows[8]["mean"] == pytest.approx(11.5) and rows[8]["env_steps"] == 90
+    assert rows[9]["mean"] == pytest.approx(16.5)  # seed 0 as of iteration 8: both end at 9
