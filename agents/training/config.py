@@ -195,6 +195,11 @@ class TrainConfig:
     layers scaled, see :meth:`GraphActor.sharpen`): below 1 the policy PPO samples, and so
     improves, comes closer to the greedy policy that is deployed. The greedy actions stay
     those of the warm start. 1: as imitated."""
+    init_checkpoint: str = ""
+    """A checkpoint (``model_<it>.pt`` of a run, or a shipped one) whose actor and critic
+    weights PPO starts from, in place of the warm start: tensors only are read, and neither its
+    optimizer state nor its iteration. Its model must be this config's ``model``. Empty: the
+    warm start (or nothing) as ``pretrain`` and ``ensemble`` say."""
     pretrain: PretrainConfig = field(default_factory=PretrainConfig)
     ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
     algorithm: AlgorithmConfig = field(default_factory=AlgorithmConfig)
@@ -223,9 +228,13 @@ class TrainConfig:
             (self.conflict_penalty >= 0, "conflict_penalty", "must be >= 0"),
             (self.warm_start_temperature > 0 and math.isfinite(self.warm_start_temperature),
              "warm_start_temperature", "must be a finite number > 0"),
-            (self.warm_start_temperature == 1.0
+            (self.warm_start_temperature == 1.0 or bool(self.init_checkpoint)
              or (self.pretrain.days > 0 and self.pretrain.epochs > 0), "warm_start_temperature",
-             "sharpens the warm start: it needs pretrain.days and pretrain.epochs > 0"),
+             "sharpens the warm start: it needs pretrain.days and pretrain.epochs > 0, or an "
+             "init_checkpoint"),
+            (not self.init_checkpoint or (self.pretrain.days == 0 and self.ensemble.fits == 0),
+             "init_checkpoint", "replaces the warm start: it needs pretrain.days: 0 and "
+             "ensemble.fits: 0"),
             (self.ensemble.fits >= 0, "ensemble.fits", "must be >= 0"),
             (self.ensemble.fits == 0 or (self.pretrain.days > 0 and self.pretrain.epochs > 0),
              "ensemble.fits", "refits the warm start: it needs pretrain.days and pretrain.epochs > 0"),

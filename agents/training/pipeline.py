@@ -2,6 +2,8 @@
 (:mod:`~agents.training.imitation`), the ensemble stage (:mod:`~agents.training.ensemble`),
 PPO with rsl_rl (:mod:`~agents.training.runner`) and the evaluation against the baselines.
 
+PPO may instead start from a checkpoint (``init_checkpoint``), in place of the warm start.
+
 A run lives in its own folder (``runs/train/<name>/``): the resolved configs, TensorBoard logs,
 checkpoints ``model_<it>.pt`` (written atomically), ``curves.csv``, the warm start's
 ``warmstart.csv`` and progress ``warmstart_state.pt``, ``learning_curves.png`` and the final
@@ -75,6 +77,9 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         runner.current_learning_iteration += 1
         curves = [r for r in curves if r["iteration"] < runner.current_learning_iteration]
         log(f"resuming {run_dir} from {ckpt.name} at iteration {runner.current_learning_iteration}")
+    elif cfg.init_checkpoint:
+        warm_rows, curves = [], []
+        init_stage(runner, cfg, run_dir, log)
     else:
         warm_rows, curves = warm_start_stage(runner, cfg, env_cfg, run_dir, resume, log, backend), []
     phases = {"set-up and warm start": time.time() - started}
@@ -140,6 +145,21 @@ def warm_start_stage(runner, cfg: TrainConfig, env_cfg, run_dir: Path, resume: b
         log(f"warm start sharpened: logits / {cfg.warm_start_temperature:g} "
             "(the same greedy actions)")
     return warm_rows
+
+
+def init_stage(runner, cfg: TrainConfig, run_dir: Path, log: Log) -> None:
+    """PPO starts from ``cfg.init_checkpoint``'s actor and critic (weights only), sharpened by
+    ``warm_start_temperature``; the run keeps its starting point as ``model_warmstart.pt``
+    (unsharpened, as a warm start's)."""
+    path = Path(cfg.init_checkpoint)
+    if not path.is_file():
+        raise ConfigError(f"init_checkpoint: {path}: no such file")
+    load_checkpoint_into(runner, path, {"actor": True, "critic": True})
+    runner.save(str(run_dir / "model_warmstart.pt"), {"init_checkpoint": str(path)})
+    log(f"PPO starts from {path} (actor and critic weights)")
+    if cfg.warm_start_temperature != 1.0:
+        runner.alg.actor.sharpen(cfg.warm_start_temperature)
+        log(f"start sharpened: logits / {cfg.warm_start_temperature:g} (the same greedy actions)")
 
 
 def ppo_stage(runner, vec_env, cfg: TrainConfig, run_dir: Path, curves: list[dict[str, float]],

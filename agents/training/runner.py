@@ -78,11 +78,12 @@ def make_runner_class():
     return AtomicRunner
 
 
-def load_checkpoint_into(runner, path: Path) -> None:
+def load_checkpoint_into(runner, path: Path, parts: dict[str, bool] | None = None) -> None:
     """Load a checkpoint into a runner (tensors and plain data only), with a one-line error
-    when it does not fit or is not one."""
+    when it does not fit or is not one. ``parts``: rsl_rl's ``load_cfg`` (which of ``actor``,
+    ``critic``, ``optimizer`` and ``iteration`` to read); None: all of them."""
     try:
-        runner.load(str(path), map_location=runner.device)
+        runner.load(str(path), load_cfg=parts, map_location=runner.device)
     except (RuntimeError, KeyError, EOFError, OSError, pickle.UnpicklingError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ValueError(f"checkpoint {path} cannot be loaded into this run: {first}") from None

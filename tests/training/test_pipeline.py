@@ -261,3 +261,38 @@ def test_linear_schedule_decays_the_learning_rate_to_zero_over_the_run(monkeypat
     alg.updates_done = 2  # a resumed run picks the schedule up where it stopped
     alg.update()
     assert rates[-1][0] == pytest.approx(5e-4)
+
+
+def test_ppo_can_start_from_a_checkpoint_in_place_of_the_warm_start(tmp_path):
+    """``init_checkpoint``: the run reads the checkpoint's actor and critic (weights only, not
+    its iteration), keeps them as model_warmstart.pt, and PPO's first iteration (actor frozen)
+    holds that actor; a missing file, a model of another shape and a warm start beside it are
+    refused with the key named."""
+    source = tmp_path / "source"
+    train(tiny_config("multi_agent", iterations=2), source, log=lambda *_: None, evaluate=False)
+    start = torch.load(source / "model_1.pt", weights_only=True)
+    run = tmp_path / "run"
+    cfg = tiny_config("multi_agent", iterations=1, critic_warmup_iterations=1,
+                      init_checkpoint=str(source / "model_1.pt"))
+    lines: list[str] = []
+    final = train(cfg, run, log=lines.append, evaluate=False)
+    assert final.name == "model_0.pt"  # iteration 0 of this run, not the source's 2
+    assert any("PPO starts from" in line for line in lines)
+    warm = torch.load(run / "model_warmstart.pt", weights_only=True)
+    first = torch.load(final, weights_only=True)
+    for part in ("actor_state_dict", "critic_state_dict"):
+        for key, value in start[part].items():
+            assert torch.equal(warm[part][key], value), (part, key)
+    for key, value in start["actor_state_dict"].items():
+        assert torch.equal(first["actor_state_dict"][key], value), key  # frozen: unchanged
+    missing = build_dataclass(TrainConfig, {**to_dict(cfg), "init_checkpoint": str(tmp_path / "no.pt")})
+    with pytest.raises(ConfigError, match="init_checkpoint: .*no such file"):
+        train(missing, tmp_path / "missing", log=lambda *_: None, evaluate=False)
+    other = build_dataclass(TrainConfig, {**to_dict(cfg),
+                                          "model": {"hidden": 8, "hidden_dims": [8]}})
+    with pytest.raises(ValueError, match="cannot be loaded into this run"):
+        train(other, tmp_path / "other", log=lambda *_: None, evaluate=False)
+    with pytest.raises(ConfigError, match="init_checkpoint: replaces the warm start"):
+        tiny_config("multi_agent", init_checkpoint="x.pt",
+                    pretrain={"days": 1, "epochs": 1, "batch_size": 64, "learning_rate": 1e-3})
+    tiny_config("multi_agent", init_checkpoint="x.pt", warm_start_temperature=0.5)  # accepted
