@@ -140,11 +140,17 @@ def warm_start_stage(runner, cfg: TrainConfig, env_cfg, run_dir: Path, resume: b
             for k, content in enumerate(refits, start=1):
                 write_torch_atomic(run_dir / f"model_refit{k}.pt", content)
         runner.save(str(run_dir / "model_distilled.pt"), {"warm_start": {**stats, **ens_stats}})
+    sharpen_start(runner, cfg, log)
+    return warm_rows
+
+
+def sharpen_start(runner, cfg: TrainConfig, log: Log) -> None:
+    """Divide the logits of the actor PPO starts from by ``warm_start_temperature`` (for good;
+    the greedy actions stay), where it is not 1."""
     if cfg.warm_start_temperature != 1.0:
         runner.alg.actor.sharpen(cfg.warm_start_temperature)
         log(f"warm start sharpened: logits / {cfg.warm_start_temperature:g} "
             "(the same greedy actions)")
-    return warm_rows
 
 
 def init_stage(runner, cfg: TrainConfig, run_dir: Path, log: Log) -> None:
@@ -157,9 +163,7 @@ def init_stage(runner, cfg: TrainConfig, run_dir: Path, log: Log) -> None:
     load_checkpoint_into(runner, path, {"actor": True, "critic": True})
     runner.save(str(run_dir / "model_warmstart.pt"), {"init_checkpoint": str(path)})
     log(f"PPO starts from {path} (actor and critic weights)")
-    if cfg.warm_start_temperature != 1.0:
-        runner.alg.actor.sharpen(cfg.warm_start_temperature)
-        log(f"start sharpened: logits / {cfg.warm_start_temperature:g} (the same greedy actions)")
+    sharpen_start(runner, cfg, log)
 
 
 def ppo_stage(runner, vec_env, cfg: TrainConfig, run_dir: Path, curves: list[dict[str, float]],
