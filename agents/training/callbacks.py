@@ -103,7 +103,9 @@ class RunProgress(Callback):
                "value_loss": scalars.get("Loss/value", nan),
                "surrogate_loss": scalars.get("Loss/surrogate", nan),
                "entropy": scalars.get("Loss/entropy", nan),
-               "learning_rate": scalars.get("Loss/learning_rate", nan)}
+               "learning_rate": scalars.get("Loss/learning_rate", nan),
+               "actor_grad_norm": scalars.get("Loss/actor_grad_norm", nan),
+               "actor_clip_fraction": scalars.get("Loss/actor_clip_fraction", nan)}
         row.update(self.vec_env.pop_episode_means())  # the days that ended in this iteration
         self.pending[it] = row
         eta = elapsed / (it + 1 - self.start_it) * (self.iterations - it - 1)

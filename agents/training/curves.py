@@ -22,8 +22,11 @@ from marl_vertiport.sim.metrics import TRAINING_METRICS
 WARM_CURVE_KEYS = ("round", "driver", "env_steps", *ROUND_METRICS, "cross_entropy", "accuracy",
                    "kept_round")
 #: Columns of ``curves.csv``: one row per PPO iteration.
+#: ``actor_grad_norm`` is the actor's gradient norm before the clip (the mean over the
+#: iteration's gradient steps), ``actor_clip_fraction`` the share of steps the clip scaled down
+#: (agents/training/ppo.py; both 0 while the actor is frozen).
 CURVE_KEYS = ("iteration", "env_steps", "steps_per_s", "mean_reward", "value_loss", "surrogate_loss",
-              "entropy", "learning_rate", *TRAINING_METRICS)
+              "entropy", "learning_rate", "actor_grad_norm", "actor_clip_fraction", *TRAINING_METRICS)
 
 
 def read_curves(path: Path) -> list[dict[str, float]]:

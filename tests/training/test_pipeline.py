@@ -60,7 +60,10 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     cfg3 = build_dataclass(TrainConfig, {**to_dict(cfg), "iterations": 3})
     final3 = train(cfg3, tmp_path, resume=True, log=lambda *_: None, evaluate=False)
     assert final3.name == "model_2.pt"
-    assert [int(r["iteration"]) for r in read_curves(tmp_path / "curves.csv")] == [0, 1, 2]
+    rows = read_curves(tmp_path / "curves.csv")
+    assert [int(r["iteration"]) for r in rows] == [0, 1, 2]
+    # No critic warm-up here: the actor takes a gradient in every iteration.
+    assert all(r["actor_grad_norm"] > 0 and 0 <= r["actor_clip_fraction"] <= 1 for r in rows)
 
 def test_nan_in_training_stops_with_the_iteration_named(tmp_path, monkeypatch):
     from rsl_rl.algorithms import PPO
@@ -241,6 +244,34 @@ def test_warmup_ppo_freezes_the_actor_for_the_first_updates(monkeypatch):
     alg.update()
     assert seen[-1] is True
 
+def test_grad_norm_probe_reads_the_actors_gradient_before_the_clip():
+    """The probe's norm is the actor's gradient norm as the backward pass leaves it, not as
+    the clip leaves it; a step in which the actor is frozen is not counted, and WarmupPPO
+    reports the mean norm and the share of steps above ``max_grad_norm``."""
+    from agents.training.ppo import GradNormProbe
+
+    torch.manual_seed(0)
+    actor, critic = torch.nn.Linear(3, 2), torch.nn.Linear(3, 1)
+    optimizer = torch.optim.SGD(list(actor.parameters()) + list(critic.parameters()), lr=0.1)
+    probe = GradNormProbe(actor, optimizer)
+    x = torch.randn(16, 3)
+    expected = []
+    for scale in (1.0, 100.0):
+        optimizer.zero_grad()
+        (scale * actor(x).pow(2).mean() + critic(x).mean()).backward()
+        expected.append(float(torch.linalg.vector_norm(
+            torch.cat([p.grad.flatten() for p in actor.parameters()]))))
+        torch.nn.utils.clip_grad_norm_(actor.parameters(), 0.5)
+        optimizer.step()
+    actor.requires_grad_(False)  # frozen: only the critic steps
+    optimizer.zero_grad()
+    critic(x).mean().backward()
+    optimizer.step()
+    norms = probe.pop()
+    assert norms == pytest.approx(expected, rel=1e-6) and expected[1] > 0.5
+    assert probe.pop() == []
+
+
 def test_linear_schedule_decays_the_learning_rate_to_zero_over_the_run(monkeypatch):
     from rsl_rl.algorithms import PPO
 
@@ -285,6 +316,8 @@ def test_ppo_can_start_from_a_checkpoint_in_place_of_the_warm_start(tmp_path):
             assert torch.equal(warm[part][key], value), (part, key)
     for key, value in start["actor_state_dict"].items():
         assert torch.equal(first["actor_state_dict"][key], value), key  # frozen: unchanged
+    (row,) = read_curves(run / "curves.csv")
+    assert row["actor_grad_norm"] == 0 and row["actor_clip_fraction"] == 0  # and no gradient
     missing = build_dataclass(TrainConfig, {**to_dict(cfg), "init_checkpoint": str(tmp_path / "no.pt")})
     with pytest.raises(ConfigError, match="init_checkpoint: .*no such file"):
         train(missing, tmp_path / "missing", log=lambda *_: None, evaluate=False)

@@ -4,6 +4,8 @@ groups (no ``state()``)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -222,3 +224,97 @@ def test_the_models_and_the_algorithm_are_named_in_the_train_config(tmp_path):
     model["actor_class"] = "os:system"
     with pytest.raises(CheckpointError, match="trained with the actor class os:system"):
         GCNController(content)
+
+
+def test_a_row_per_evtol_and_a_row_per_turn_give_one_ppo_gradient():
+    """From the same rollout, the two layouts give PPO the same gradient, up to the actor's
+    scale. A row whose eVTOL has no turn has one legal action ("stay"), so its log-probability
+    and entropy are 0 and carry no gradient; under the team reward and the centralised critic
+    its reward, value, return and advantage are those of its copy's acting row. So the critic's
+    gradient is the same, and the actor's is the turn rows' over N (the fleet size; times the
+    ratio of the two advantage normalisations, within a few per cent of 1), a scale Adam's step
+    does not see. Checked in eval mode (the RReLUs' slopes fixed), on one full mini-batch,
+    without the entropy bonus (0 at those rows, so it too scales by 1/N) and with no binding
+    gradient clip: what is left between the layouts in a run is which rows share a
+    mini-batch, and the clip, which a gradient N times smaller meets less often."""
+    from rsl_rl.runners import OnPolicyRunner
+
+    n_copies, n_steps = 3, 10
+    base = to_dict(TrainConfig())
+    base.update(mode="multi_agent", critic="state", team_reward=True, num_envs=n_copies,
+                num_steps_per_env=n_steps, iterations=1, reward_scale=0.05, conflict_penalty=10.0,
+                pretrain={"days": 0}, evaluation={"episodes": 0, "agents": []},
+                algorithm={"num_learning_epochs": 1, "num_mini_batches": 1, "entropy_coef": 0.0,
+                           "max_grad_norm": 1e9, "use_clipped_value_loss": False,
+                           "schedule": "fixed"})
+    envs, algs = {}, {}
+    torch.manual_seed(0)
+    for rows in ("agents", "turns"):
+        cfg = build_dataclass(TrainConfig, {**base, "rows": rows})
+        envs[rows] = MultiAgentVecEnv("paper", num_envs=n_copies, seed=5, rows=rows,
+                                      reward_scale=0.05, conflict_penalty=10.0)
+        algs[rows] = OnPolicyRunner(envs[rows], runner_config(cfg), log_dir=None, device="cpu").alg
+    fleet = envs["agents"].rows_per_env
+    assert fleet == 4 and envs["agents"].num_envs == fleet * n_copies
+    a, t = algs["agents"], algs["turns"]
+    t.actor.load_state_dict(a.actor.state_dict())
+    t.critic.load_state_dict(a.critic.state_dict())
+    for alg in (a, t):  # the RReLUs' slopes fixed (in train mode each pass draws its own)
+        alg.eval_mode()
+    for _ in range(n_steps):
+        rows = envs["agents"].acting_rows()
+        obs_a, obs_t = envs["agents"].get_observations(), envs["turns"].get_observations()
+        actions = a.act(obs_a)
+        # The rows without a turn: one legal action, log-probability and entropy exactly 0.
+        idle = torch.ones(fleet * n_copies, dtype=torch.bool)
+        idle[rows] = False
+        assert torch.all(obs_a["action_mask"][idle].sum(-1) == 1)
+        assert torch.all(a.transition.actions_log_prob[idle] == 0)
+        assert torch.all(a.actor.output_entropy[idle] == 0)
+        # Every row of a copy has its copy's value (the critic reads state()).
+        values = a.transition.values.reshape(n_copies, fleet)
+        torch.testing.assert_close(values, values[:, :1].expand(-1, fleet))
+        # The turn layout acts with the acting rows' sampled actions.
+        t.act(obs_t)
+        t.transition.actions = actions[rows].clone()
+        t.transition.actions_log_prob = t.actor.get_output_log_prob(t.transition.actions).detach()
+        torch.testing.assert_close(t.transition.actions_log_prob, a.transition.actions_log_prob[rows])
+        torch.testing.assert_close(t.transition.values, a.transition.values[rows])
+        _, rew_t, done_t, extras_t = envs["turns"].step(actions[rows])
+        _, rew_a, done_a, extras_a = envs["agents"].step(actions)
+        assert torch.equal(rew_a.reshape(n_copies, fleet), rew_t[:, None].expand(-1, fleet))
+        t.process_env_step(obs_t, rew_t, done_t, {"time_outs": extras_t["time_outs"]})
+        a.process_env_step(obs_a, rew_a, done_a, {"time_outs": extras_a["time_outs"]})
+    for rows, alg in algs.items():
+        alg.compute_returns(envs[rows].get_observations())
+    # Returns repeat over a copy's rows.
+    returns = a.storage.returns.reshape(n_steps, n_copies, fleet)
+    torch.testing.assert_close(returns, returns[..., :1].expand(-1, -1, fleet))
+    torch.testing.assert_close(returns[..., 0], t.storage.returns.reshape(n_steps, n_copies))
+    # One full-batch update from each; the gradients it leaves are those at the common start.
+    start = [p.detach().clone() for p in a.actor.parameters()]
+    for alg in (a, t):
+        alg.update()
+    grads = {f"{rows}/{part}": [p.grad.clone() for p in getattr(alg, part).parameters()]
+             for rows, alg in algs.items() for part in ("actor", "critic")}
+    assert any(g.abs().max() > 0 for g in grads["turns/actor"])
+    for g_a, g_t in zip(grads["agents/critic"], grads["turns/critic"]):
+        torch.testing.assert_close(g_a, g_t, rtol=1e-4, atol=1e-7)
+    flat_a = torch.cat([g.flatten() for g in grads["agents/actor"]])
+    flat_t = torch.cat([g.flatten() for g in grads["turns/actor"]])
+    # The scale: N, times the ratio of the advantages' standard deviations over the N * M
+    # rows (each copy's advantages repeated N times) and over the M turn rows.
+    m = n_steps * n_copies
+    expected = fleet * math.sqrt(fleet * (m - 1) / (fleet * m - 1))
+    scale = float(flat_t @ flat_a / (flat_a @ flat_a))
+    assert abs(scale / expected - 1) < 1e-4, (scale, expected)
+    torch.testing.assert_close(flat_a * scale, flat_t, rtol=1e-4, atol=1e-7)
+    # Adam's step does not see that scale: the actor's parameters move alike from the common
+    # start (wherever the gradient is well above Adam's eps, 1e-8).
+    moves = {rows: torch.cat([(p.detach() - s0).flatten() for p, s0 in
+                              zip(alg.actor.parameters(), start)]) for rows, alg in algs.items()}
+    clear = flat_t.abs() > 1e-4
+    assert clear.sum() > 1000 and moves["turns"][clear].abs().min() > 0
+    torch.testing.assert_close(moves["agents"][clear], moves["turns"][clear], rtol=1e-3, atol=0)
+    for rows in envs:
+        envs[rows].close()
