@@ -25,7 +25,8 @@ class GradNormProbe:
     Each parameter's post-accumulate-grad hook adds its squared gradient norm when the
     backward pass has finished it; the optimiser's step pre-hook, which runs after rsl_rl's
     clip, closes the step. Steps in which no parameter of the module took a gradient (the
-    actor frozen) are not counted.
+    actor frozen) are not counted. Gradients taken outside the watched optimiser's steps (an
+    imitation fit of the same module) are dropped by :meth:`reset`.
 
     Args:
         module: whose parameters are watched.
@@ -47,6 +48,11 @@ class GradNormProbe:
         if self._square is not None:
             self._norms.append(self._square.sqrt())
         self._square = None
+
+    def reset(self) -> None:
+        """Forget every gradient seen so far."""
+        self._square = None
+        self._norms.clear()
 
     def pop(self) -> list[float]:
         """The norms of the steps since the last call, oldest first."""
@@ -88,9 +94,11 @@ class WarmupPPO(PPO):
         frozen = self.actor_frozen
         if frozen:
             self.actor.requires_grad_(False)
+        probe = getattr(self, "actor_grad_probe", None)  # absent where built without __init__
+        if probe is not None:
+            probe.reset()
         try:
             losses = super().update()
-            probe = getattr(self, "actor_grad_probe", None)
             if probe is not None:
                 norms = probe.pop()
                 losses["actor_grad_norm"] = sum(norms) / len(norms) if norms else 0.0

@@ -32,7 +32,8 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     cfg = tiny_config(mode, pretrain={"days": 2, "day_steps": 24, "teacher": teacher,
                                       "rollout_horizon": 4, "workers": 1, "epochs": 1,
                                       "batch_size": 64, "learning_rate": 1e-3, "dagger_rounds": 1,
-                                      "dagger_epochs": 2})
+                                      "dagger_epochs": 2},
+                      critic_warmup_iterations=1)
     lines: list[str] = []
     final = train(cfg, tmp_path, log=lambda line, *_: lines.append(str(line)), evaluate=False)
     # Behaviour cloning fits `epochs` passes, the DAgger round `dagger_epochs`; each round is timed.
@@ -62,8 +63,10 @@ def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
     assert final3.name == "model_2.pt"
     rows = read_curves(tmp_path / "curves.csv")
     assert [int(r["iteration"]) for r in rows] == [0, 1, 2]
-    # No critic warm-up here: the actor takes a gradient in every iteration.
-    assert all(r["actor_grad_norm"] > 0 and 0 <= r["actor_clip_fraction"] <= 1 for r in rows)
+    # The actor is frozen in iteration 0 (the warm start's fits leave no gradient to count)
+    # and takes a gradient in the others.
+    assert rows[0]["actor_grad_norm"] == 0 and rows[0]["actor_clip_fraction"] == 0
+    assert all(r["actor_grad_norm"] > 0 and 0 <= r["actor_clip_fraction"] <= 1 for r in rows[1:])
 
 def test_nan_in_training_stops_with_the_iteration_named(tmp_path, monkeypatch):
     from rsl_rl.algorithms import PPO
@@ -255,6 +258,8 @@ def test_grad_norm_probe_reads_the_actors_gradient_before_the_clip():
     optimizer = torch.optim.SGD(list(actor.parameters()) + list(critic.parameters()), lr=0.1)
     probe = GradNormProbe(actor, optimizer)
     x = torch.randn(16, 3)
+    actor(x).sum().backward()  # a gradient outside the optimiser's steps (an imitation fit)
+    probe.reset()
     expected = []
     for scale in (1.0, 100.0):
         optimizer.zero_grad()
