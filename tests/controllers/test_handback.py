@@ -21,6 +21,9 @@ def test_handback_is_the_guard_around_the_shipped_policy_with_its_settings():
     assert isinstance(controller.base, GCNController) and controller.base.path == SHIPPED_CHECKPOINT
     assert isinstance(controller.fleet, DispatcherController)
     assert (controller.defer_pct, controller.margin_pct, controller.quiet_pct) == (30, 25, 101)
+    assert controller.reward_margin == 0.0  # the rollouts choose between policy and dispatcher
+    assert make_controller("handback[reward_margin=null]").reward_margin is None
+    assert make_controller("handback[reward_margin=10]").reward_margin == 10.0
     assert controller.onward is None
     changed = make_controller("handback[self_check=true,defer_pct=40]")
     assert changed.onward.policy.name.endswith(":fast") and changed.onward.defer_pct == 40
