@@ -104,7 +104,7 @@ results: $(STAMP)  ## regenerate every shipped result of the shipped policy but 
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
 
-bar: $(STAMP)  ## the learned ATC against the bar: handback on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 126 minutes on a 2-core Intel Xeon)
+bar: $(STAMP)  ## the learned ATC against the bar: handback on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 55 minutes on a 2-core Intel Xeon)
 	$(CLI) evaluate --agents handback --configs paper paper_uncertain paper_uncertain_10 --episodes $(BAR_DAYS) --out docs/results/bar --report docs/results/bar.md $(RUN_ON)
 	for base in heuristic gcn rollout; do $(PY) -m agents.evaluate.paired docs/results/episodes.csv docs/results/bar/episodes.csv --pair $$base handback --csv docs/results/bar/paired_$$base.csv || exit 1; echo; done > docs/results/bar_paired.md
 

@@ -21,7 +21,7 @@ from agents.controllers.registry import SHIPPED_CHECKPOINT
 DOCS = REPO_ROOT / "docs"
 SETS = check.find_sets(DOCS)
 #: The sets the docs report on; a missing one is a missing result, not a pass.
-EXPECTED = {"docs/results", "docs/results/transfer", "docs/results/scaling",
+EXPECTED = {"docs/results", "docs/results/bar", "docs/results/transfer", "docs/results/scaling",
             "docs/results/sweeps/wind", "docs/results/safety/u00", "docs/results/safety/u05",
             "docs/results/safety/u10"}
 #: Learning-curve figures of PPO from scratch (docs/training.md): made before result files
