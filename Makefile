@@ -10,7 +10,7 @@ CLI    := $(VENV)/bin/marl-vertiport
 CONFIG ?= paper
 
 .DEFAULT_GOAL := help
-AGENTS   ?= random fcfs heuristic
+AGENTS   ?= random fcfs dispatcher
 EPISODES ?= 50
 # Whether EPISODES was given (make evaluate SUITE=... EPISODES=N: the first N of the suite's days).
 EPISODES_GIVEN = $(filter command line environment environment override,$(origin EPISODES))
@@ -18,7 +18,7 @@ CONFIGS  ?= paper paper_uncertain
 OUT      ?= runs/eval
 # make evaluate renders each controller's worst day with its decision log (0: it does not).
 WORST_DAY ?= 1
-AGENT    ?= heuristic
+AGENT    ?= dispatcher
 SWEEP    ?= wind
 CURVES   ?= scratch
 SEEDS    ?= 3
@@ -27,7 +27,7 @@ ITERATIONS ?=
 # uncertainty, which it sets itself).
 SAFETY_LAYOUTS ?= paper small twin wide mid large fleet40_overloaded
 # The test days per case `make bar` plays: the first BAR_DAYS of the 200 of docs/results.md
-# (handback looks ahead on every contested decision: 10 to 80 s a day on one core).
+# (lookahead looks ahead on every contested decision: 10 to 80 s a day on one core).
 BAR_DAYS ?= 100
 
 # Where `evaluate`, `sweep` and `train` run their tasks: BACKEND=ray (Ray reads RAY_ADDRESS,
@@ -99,18 +99,18 @@ sweep: $(STAMP)  ## run the sweep SWEEP of configs/sweeps/ (default wind) into r
 	$(CLI) sweep $(SWEEP) --out runs/sweeps/$(notdir $(basename $(SWEEP))) $(RUN_ON)
 
 results: $(STAMP)  ## regenerate every shipped result of the shipped policy but the bar's: docs/results.md (200 test days per uncertainty level, the planner included), docs/results/transfer.md and docs/results/scaling.md (the suites), docs/results/sweeps/wind (the wind sweep)
-	$(CLI) evaluate --agents random fcfs heuristic rollout gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 200 --out docs/results --report docs/results.md $(RUN_ON)
+	$(CLI) evaluate --agents random fcfs dispatcher planner gcn --configs paper paper_uncertain paper_uncertain_10 --episodes 200 --out docs/results --report docs/results.md $(RUN_ON)
 	$(CLI) evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md $(RUN_ON)
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
 
-bar: $(STAMP)  ## the learned ATC against the bar: handback on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 55 minutes on a 2-core Intel Xeon)
-	$(CLI) evaluate --agents handback --configs paper paper_uncertain paper_uncertain_10 --episodes $(BAR_DAYS) --out docs/results/bar --report docs/results/bar.md $(RUN_ON)
-	for base in heuristic gcn rollout; do $(PY) -m agents.evaluate.paired docs/results/episodes.csv docs/results/bar/episodes.csv --pair $$base handback --csv docs/results/bar/paired_$$base.csv || exit 1; echo; done > docs/results/bar_paired.md
+bar: $(STAMP)  ## the learned ATC against the bar: lookahead on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 55 minutes on a 2-core Intel Xeon)
+	$(CLI) evaluate --agents lookahead --configs paper paper_uncertain paper_uncertain_10 --episodes $(BAR_DAYS) --out docs/results/bar --report docs/results/bar.md $(RUN_ON)
+	for base in dispatcher gcn planner; do $(PY) -m agents.evaluate.paired docs/results/episodes.csv docs/results/bar/episodes.csv --pair $$base lookahead --csv docs/results/bar/paired_$$base.csv || exit 1; echo; done > docs/results/bar_paired.md
 
 # One set of make safety: $(call SAFETY_SET,name,probability of gusts, charger and take-off
 # failures; empty: the configs' own).
-SAFETY_SET = $(CLI) evaluate --agents random fcfs heuristic gcn --configs $(SAFETY_LAYOUTS) --episodes 50 $(if $(2),--set uncertainty.wind_gust_prob=$(2) --set uncertainty.charger_failure_prob=$(2) --set uncertainty.takeoff_failure_prob=$(2)) --out docs/results/safety/$(1) --report docs/results/safety/$(1).md $(RUN_ON)
+SAFETY_SET = $(CLI) evaluate --agents random fcfs dispatcher gcn --configs $(SAFETY_LAYOUTS) --episodes 50 $(if $(2),--set uncertainty.wind_gust_prob=$(2) --set uncertainty.charger_failure_prob=$(2) --set uncertainty.takeoff_failure_prob=$(2)) --out docs/results/safety/$(1) --report docs/results/safety/$(1).md $(RUN_ON)
 
 safety: $(STAMP)  ## every controller but the planner on every shipped layout at 0, 5 and 10 % uncertainty (gusts, charger and take-off failures), 50 test days a cell: losses of separation, contacts, minimum separation (docs/results/safety/; about 15 minutes on an idle 2-core AMD EPYC)
 	$(call SAFETY_SET,u00,)

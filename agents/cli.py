@@ -18,7 +18,8 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     check-config  validate an env config and print it resolved
 
 Each command is also a module (``python -m agents.evaluate`` and so on); this entry point only
-dispatches to them, importing the one it runs.
+dispatches to them, importing the one it runs. A name that changed in 0.2.0 (``heuristic``,
+``rollout``, ``handback``, ...) still works and prints one line, ``note: ...``.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+
+from agents.common.names import show_notes_on_one_line
 
 #: Command -> (module whose ``main(argv)`` runs it, one-line help).
 COMMANDS = {
@@ -67,6 +70,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] not in COMMANDS:
         build_parser().parse_args(argv[:1])  # prints the help, or the error, and exits
+    show_notes_on_one_line()
     command, rest = argv[0], argv[1:]
     module_name, _ = COMMANDS[command]
     # --help and the result files name the command as the user typed it.

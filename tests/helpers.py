@@ -122,3 +122,18 @@ def dispatcher_decision(env, found, seeds=(0,)):
                 return dispatcher, obs, choice, legal
             env.step(choice)
     raise AssertionError(f"no such decision on days {list(seeds)} flown by the dispatcher")
+
+
+def guarded_actions(env, guard, seed: int) -> list[int]:
+    """The actions a look-ahead ``guard`` takes on day ``seed`` of ``env``, bound to its simulator."""
+    actions = []
+    env.reset(seed=seed)
+    guard.reset(seed=seed)
+    guard.bind(env.unwrapped.sim)
+    for agent in env.agent_iter():
+        if env.terminations[agent] or env.truncations[agent]:
+            env.step(None)
+            continue
+        actions.append(guard.act(env.observe(agent)))
+        env.step(actions[-1])
+    return actions

@@ -66,8 +66,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.bench") ->
     parser.add_argument("--check-repeats", type=int, default=CHECK_REPEATS,
                         help="interleaved replays a side for the separation check's cost "
                              f"(default: {CHECK_REPEATS})")
-    parser.add_argument("--traffic-agents", nargs="+", default=["heuristic", "fcfs"],
-                        help="controllers whose traffic is replayed (default: heuristic fcfs)")
+    parser.add_argument("--traffic-agents", nargs="+", default=["dispatcher", "fcfs"],
+                        help="controllers whose traffic is replayed (default: dispatcher fcfs)")
     parser.add_argument("--planner-decisions", type=int, default=1440,
                         help="turns the look-ahead planner is timed over (default: 1440, a day)")
     parser.add_argument("--vector-steps", type=int, default=400)

@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.bench.comp
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--base", type=Path, required=True,
                         help="the other checkout (e.g. a git worktree of the commit before)")
-    parser.add_argument("--agent", default="heuristic", help="whose traffic (default: heuristic)")
+    parser.add_argument("--agent", default="dispatcher", help="whose traffic (default: dispatcher)")
     parser.add_argument("--config", default="paper", help="env config (default: paper)")
     parser.add_argument("--days", type=int, default=4, help="days of traffic (default: 4)")
     parser.add_argument("--repeats", type=int, default=5, help="timed replays of each (default: 5)")

@@ -226,7 +226,7 @@ def bench_separation_check(days: int, repeats: int, config: str = "paper",
     off = with_rules(on, 0).replace(
         **{"battery.cruise_drain_scale": on.battery.cruise_drain_scale})
     cfgs = {"on": on, "off": off}
-    traffic = {k: record_traffic("heuristic", c, days, seed) for k, c in cfgs.items()}
+    traffic = {k: record_traffic("dispatcher", c, days, seed) for k, c in cfgs.items()}
     rates: dict[str, list[float]] = {"on": [], "off": []}
     for _ in range(repeats):
         for k, cfg in cfgs.items():
@@ -253,7 +253,7 @@ def bench_fleet_sizes(days: int, repeats: int, seed: int = 2200) -> list[dict[st
     rows = []
     for label, name, overrides in FLEET_SIZES:
         cfg = load_config(name, **overrides)
-        traffic = record_traffic("heuristic", cfg, days, seed)
+        traffic = record_traffic("dispatcher", cfg, days, seed)
         steps = sum(len(day) for day in traffic)
         runs = [env_loop("aec", cfg, steps, seed, traffic=traffic) for _ in range(repeats)]
         per_step = statistics.median(run["elapsed_s"] / run["steps"] for run in runs)

@@ -86,7 +86,7 @@ def bench_profile(days: int, top: int = 14, seed: int = 2300) -> dict[str, Any]:
     import cProfile
     import pstats
 
-    traffic = record_traffic("heuristic", "paper", days, seed)
+    traffic = record_traffic("dispatcher", "paper", days, seed)
     steps = sum(len(day) for day in traffic)
     env_loop("aec", "paper", 50, seed=seed, traffic=traffic)  # first-call caches outside
     profiler = cProfile.Profile()
@@ -107,4 +107,4 @@ def bench_profile(days: int, top: int = 14, seed: int = 2300) -> dict[str, Any]:
         label = f"{where}:{line}({name})" if line else name
         entries.append({"function": label, "calls_per_step": calls / steps,
                         "own_share": own / total, "cumulative_share": cumulative / total})
-    return {"steps": steps, "workload": "heuristic", "top": entries}
+    return {"steps": steps, "workload": "dispatcher", "top": entries}

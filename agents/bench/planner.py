@@ -47,7 +47,7 @@ def planner_loop(config: str, decisions: int, seed: int,
     from marl_vertiport import vertiport_v1
 
     env = vertiport_v1.env(config=config)
-    timed = _TimedPlanner(make_controller("rollout"), recorder)
+    timed = _TimedPlanner(make_controller("planner"), recorder)
     metrics = run_episode(env, timed, seed, max_steps=decisions)
     env.close()
     timed.planner.close()
@@ -55,7 +55,7 @@ def planner_loop(config: str, decisions: int, seed: int,
             "engine_s": timed.engine, "spans": timed.spans}
 
 def bench_planner(config: str, decisions: int, seed: int = 2100) -> dict[str, Any]:
-    """Decisions per second of the look-ahead planner (``rollout``: a snapshot of the simulator,
+    """Decisions per second of the look-ahead planner (``planner``: a snapshot of the simulator,
     40 steps of the dispatcher per candidate action, a restore), timed over its own calls while
     it drives the AEC env through ``decisions`` turns (1440: a whole day); with the engine's
     share of that time and the engine alone (the same calls recorded in a second run and

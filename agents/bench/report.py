@@ -43,7 +43,7 @@ def _traffic_lines(rows: list[dict[str, Any]]) -> list[str]:
     """The headline: steps per second under the controllers' own traffic."""
     if not rows:
         return []
-    head = next((r for r in rows if (r["workload"], r["config"]) == ("heuristic", "paper")), rows[0])
+    head = next((r for r in rows if (r["workload"], r["config"]) == ("dispatcher", "paper")), rows[0])
     out = [
         "## Under real traffic (the headline)",
         "",
@@ -90,7 +90,7 @@ def _fleet_and_planner_lines(results: dict[str, Any]) -> list[str]:
     planner = results.get("planner")
     if planner:
         out += ["### The look-ahead planner", "",
-                f"The planner (`rollout`: per candidate action a snapshot of the simulator, 40 steps "
+                f"The planner (`planner`: per candidate action a snapshot of the simulator, 40 steps "
                 f"of the dispatcher, a restore) makes **{planner['decisions_per_s']:.0f} decisions per "
                 f"second** on `{planner['config']}` over {planner['decisions']:,} turns, "
                 f"{planner['ms_per_simulated_decision']:.1f} ms for each of the "
@@ -107,7 +107,7 @@ def _fleet_and_planner_lines(results: dict[str, Any]) -> list[str]:
 def _traffic_reading(results: dict[str, Any]) -> list[str]:
     """What bounds the speed under traffic, from the profile and the traffic rows."""
     traffic = {(r["workload"], r["config"]): r for r in results.get("traffic") or []}
-    head = traffic.get(("heuristic", "paper"))
+    head = traffic.get(("dispatcher", "paper"))
     planner = results.get("planner")
     if not head:
         return []
@@ -140,13 +140,13 @@ def _target_lines(results: dict[str, Any]) -> list[str]:
     fleet = results.get("fleet_sizes") or []
     rows = []
     for config, target in (("paper", 10_000), ("large", 4_000)):
-        r = traffic.get(("heuristic", config))
+        r = traffic.get(("dispatcher", config))
         if r:
             rows.append((f"AEC steps/s, dispatcher's traffic, `{config}` (median)", f">= {target:,}",
                          f"{r['steps_per_s_median']:,.0f} (min {r['steps_per_s_min']:,.0f})",
                          r["steps_per_s_median"] >= target))
     for config in ("paper", "large"):
-        r = traffic.get(("heuristic", config))
+        r = traffic.get(("dispatcher", config))
         if r:
             rows.append((f"overhead / engine in steps with motion, `{config}`", "<= 2",
                          f"{r['moving_overhead_ratio']:.2f}", r["moving_overhead_ratio"] <= 2.0))
@@ -167,14 +167,14 @@ def _target_lines(results: dict[str, Any]) -> list[str]:
     out += [f"| {name} | {target} | {value} | {'yes' if met else '**no**'} |"
             for name, target, value, met in rows]
     return out + ["", "`make train` is timed by the run itself: it prints the time of each part "
-                  "when it ends (docs/training.md gives a measured run).", ""]
+                  "when it ends (experiments/default-run-rules-v1 gives measured runs).", ""]
 
 
 def _profile_lines(results: dict[str, Any]) -> list[str]:
     prof = results.get("profile")
     if not prof:
         return []
-    workload = ("the dispatcher's traffic" if prof.get("workload") == "heuristic"
+    workload = ("the dispatcher's traffic" if prof.get("workload") == "dispatcher"
                 else "random legal actions")
     out = [f"### Where a step's time goes (cProfile, AEC API, `paper`, {workload}, "
            f"{prof['steps']:,} steps)", "",

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
+from agents.common.names import canonical_spec
 from agents.common.provenance import REPO_ROOT, file_sha256
 from agents.common.specs import checkpoint_files
 
@@ -166,8 +167,9 @@ def tasks_of(result: ResultSet, rows: list[dict[str, str]]) -> list:
     for row in rows:
         point = {k: _grid_value(result, k, row[k]) for k in result.grid}
         overrides = tuple({**result.overrides, **point}.items())
-        tasks.append(EpisodeTask(row["agent"], row["config"], int(row["episode"]),
-                                 int(row["seed"]), overrides, rules))
+        # Rows made before 0.2.0 name controllers by their old names: the same controllers.
+        tasks.append(EpisodeTask(canonical_spec(row["agent"], note=False), row["config"],
+                                 int(row["episode"]), int(row["seed"]), overrides, rules))
     return tasks
 
 

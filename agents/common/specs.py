@@ -1,5 +1,5 @@
 """Agent specs as text, the part every layer reads the same way: constructor arguments in
-brackets (``heuristic[holding=false]``), and the checkpoints a spec plays (``gcn``, a ``.pt``
+brackets (``dispatcher[holding=false]``), and the checkpoints a spec plays (``gcn``, a ``.pt``
 path, checkpoints joined by ``+``). Building a controller from a spec is the registry's job
 (:mod:`agents.controllers.registry`); the provenance of results reads the checkpoints here.
 """
@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
+
+from agents.common.names import canonical_spec
+from agents.common.spec_text import bracketed, top_level_items
 
 __all__ = ["SHIPPED_CHECKPOINT", "AgentSpecError", "checkpoint_files", "split_spec"]
 
@@ -19,39 +22,12 @@ class AgentSpecError(ValueError):
     """An agent name or import path that does not give a controller."""
 
 
-def _bracketed(spec: str) -> tuple[str, str] | None:
-    """``"name[args]"`` -> ``("name", "args")``, where ``args`` may hold balanced brackets of its
-    own (a spec as a value: ``handback[fleet=heuristic[holding=false]]``); ``None`` where the
-    spec is not of that form (no name, unbalanced brackets, text after the closing one)."""
-    start = spec.find("[")
-    if start < 0 or not spec[:start].strip() or "]" in spec[:start] or not spec.endswith("]"):
-        return None
-    depth = 0
-    for i in range(start, len(spec)):
-        depth += {"[": 1, "]": -1}.get(spec[i], 0)
-        if depth == 0 and i < len(spec) - 1:
-            return None  # the name's brackets close before the end
-    return (spec[:start].strip(), spec[start + 1:-1]) if depth == 0 else None
-
-
-def _top_level_items(args: str) -> list[str]:
-    """``args`` split at the commas outside brackets: ``"a=1,f=x[b=2,c=3]"`` ->
-    ``["a=1", "f=x[b=2,c=3]"]``."""
-    items, depth, start = [], 0, 0
-    for i, char in enumerate(args):
-        depth += {"[": 1, "]": -1}.get(char, 0)
-        if char == "," and depth == 0:
-            items.append(args[start:i])
-            start = i + 1
-    return [*items, args[start:]]
-
-
 def split_spec(spec: str) -> tuple[str, dict[str, Any]]:
-    """``"heuristic[holding=false,priority_margin_pct=3]"`` ->
-    ``("heuristic", {"holding": False, "priority_margin_pct": 3})``; a spec without brackets
+    """``"dispatcher[holding=false,priority_margin_pct=3]"`` ->
+    ``("dispatcher", {"holding": False, "priority_margin_pct": 3})``; a spec without brackets
     gives no arguments. A value may itself be a spec with arguments (it stays a string, for the
-    controller to build): ``"handback[fleet=heuristic[arrival_priority_pct=40]]"`` ->
-    ``("handback", {"fleet": "heuristic[arrival_priority_pct=40]"})``.
+    controller to build): ``"lookahead[rollout_policy=dispatcher[arrival_priority_pct=40]]"``
+    -> ``("lookahead", {"rollout_policy": "dispatcher[arrival_priority_pct=40]"})``.
 
     Raises:
         AgentSpecError: unbalanced brackets, an argument that is not ``key=value``, or a value
@@ -61,12 +37,12 @@ def split_spec(spec: str) -> tuple[str, dict[str, Any]]:
 
     if "[" not in spec and "]" not in spec:
         return spec, {}
-    parts = _bracketed(spec)
+    parts = bracketed(spec)
     if parts is None:
         raise AgentSpecError(f"agent {spec!r}: arguments look like 'name[key=value,key=value]'")
     target, args = parts
     kwargs: dict[str, Any] = {}
-    for item in filter(None, (part.strip() for part in _top_level_items(args))):
+    for item in filter(None, (part.strip() for part in top_level_items(args))):
         key, sep, raw = item.partition("=")
         if not sep or not key.strip().isidentifier():
             raise AgentSpecError(f"agent {spec!r}: argument {item!r} is not key=value")
@@ -77,22 +53,23 @@ def split_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return target, kwargs
 
 
-#: Built-in controllers that play the checkpoint their ``base`` names, and their default base
-#: (``None``: a rule, which plays none).
-CHECKPOINT_BASES = {"handback": "gcn", "guard": None}
+#: Built-in controllers that play the checkpoint their ``proposer`` names, and their default
+#: proposer (``None``: a rule, which plays none).
+CHECKPOINT_PROPOSERS = {"lookahead": "gcn", "guard": None}
 
 
 def checkpoint_files(spec: str) -> list[Path]:
     """The checkpoint files an agent spec plays (``gcn``, a ``.pt`` path, checkpoints joined
-    by ``+``, or a look-ahead around one: ``handback``, ``guard[base=...]``); none for any
-    other agent."""
+    by ``+``, or a look-ahead around one: ``lookahead``, ``guard[proposer=...]``); none for
+    any other agent. Names from before 0.2.0 are read as their new names."""
+    spec = canonical_spec(spec, note=False)
     try:
         target, kwargs = split_spec(spec)
     except AgentSpecError:
         target, kwargs = spec, {}
-    if target in CHECKPOINT_BASES:
-        base = kwargs.get("base", CHECKPOINT_BASES[target])
-        return checkpoint_files(base) if isinstance(base, str) else []
+    if target in CHECKPOINT_PROPOSERS:
+        proposer = kwargs.get("proposer", CHECKPOINT_PROPOSERS[target])
+        return checkpoint_files(proposer) if isinstance(proposer, str) else []
     parts = spec.split("+") if "+" in spec else [target]
     files = []
     for part in parts:

@@ -80,17 +80,17 @@ def format_events(info: dict, lost: list[int] | None = None) -> str:
 
 
 def _decided_by(policy: Any) -> str:
-    """Who took the last decision of ``policy``: the look-ahead guard (it changed the choice),
-    the controller it hands decisions to (``fleet``), or the policy itself."""
+    """Who took the last decision of ``policy``: the look-ahead (it changed the choice), the
+    rollout policy it hands decisions to, the proposer, or the policy itself."""
     name = getattr(policy, "name", type(policy).__name__)
     if getattr(policy, "last_changed", False):
         return f"{name}: look-ahead"
+    own = getattr(policy, "own_rollout_policy", None)
     if getattr(policy, "last_deferred", False):
-        fleet = getattr(policy, "fleet", None)
-        return f"{name}: {getattr(fleet, 'name', 'fleet')}"
-    base = getattr(policy, "base", None)
-    if base is not None and getattr(policy, "fleet", None) is not None:
-        return f"{name}: {getattr(base, 'name', 'base')}"
+        return f"{name}: {getattr(own, 'name', 'rollout policy')}"
+    proposer = getattr(policy, "proposer", None)
+    if proposer is not None and own is not None:
+        return f"{name}: {getattr(proposer, 'name', 'proposer')}"
     return name
 
 

@@ -32,8 +32,8 @@ minutes (the round-robin), so every timing decision looks one turn ahead:
   (the fleet size times the env's minutes per step, so a scenario that decides twice a minute
   has turns half as far apart). Unbound, it takes off at 90 %.
 
-Three rules are options, off by default (tried on validation days, docs/environment.md, section
-8.3, and docs/training.md; none is part of the frozen dispatcher):
+Three rules are options, off by default (tried on validation days, experiments/vertiport-capacity
+and experiments/what-we-tried-rules-v0; none is part of the frozen dispatcher):
 
 * **Departures first** (``yield_margin_pct``). Bound, a hovering vehicle that can afford to
   wait (after one more turn of hovering it would still hold the dearest take-off need and
@@ -54,7 +54,7 @@ Three rules are options, off by default (tried on validation days, docs/environm
 
 ``DispatcherController(holding=False)`` is the earlier dispatcher without the holding pattern
 and the priority (hovering vehicles wait in place, first come first served); the two are
-compared in ``docs/training.md`` (section "Where the lost vehicles come from").
+compared in experiments/lost-vehicles-charger-rules-v0.
 
 Every flight it chooses is one the action mask clears, so with the env's energy check
 (``atc.energy_check``) it never starts a flight the battery cannot finish. Unbound, the energy
@@ -139,7 +139,7 @@ class DispatcherController(Controller):
             waiting aloft).
     """
 
-    name = "heuristic"
+    name = "dispatcher"
     pure_act = True
 
     def __init__(self, trip_battery_pct: float = 90.0, hop_battery_pct: float = 12.0,

@@ -56,7 +56,7 @@ def check_legal(policy: Any, agent: str, action: Any, mask: np.ndarray,
 
 def prepare(policy: Any, env: Any, seed: int) -> None:
     """Start ``policy``'s episode: ``reset(seed)``, and ``bind(sim)`` for a model-based
-    controller that plans with the simulator (such as :class:`agents.controllers.planner.RolloutPlanner`)."""
+    controller that plans with the simulator (such as :class:`agents.controllers.planner.PlannerController`)."""
     if hasattr(policy, "reset"):
         policy.reset(seed=seed)
     if hasattr(policy, "bind"):

@@ -9,7 +9,7 @@ as well as the policy it rolls out, up to the horizon's truncation).
 It is a *model-based* controller: it reads the true simulator state, not only the observation,
 and simulates ``horizon`` steps per candidate (tens of milliseconds a decision). Training uses
 it as the teacher whose decisions the GCN actor learns to imitate from observations alone
-(``pretrain.teacher: rollout``); ``make evaluate AGENTS=rollout`` scores it like any agent.
+(``pretrain.teacher: planner``); ``make evaluate AGENTS=planner`` scores it like any agent.
 
 Rollouts draw the future (new flight plans, and gusts and failures where they are simulated)
 from a generator of their own, the same for every candidate of a decision (common random
@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.common.names import canonical_kwargs
 from agents.controllers.base import Controller
 from agents.controllers.dispatcher import DispatcherController
 from marl_vertiport.config import EnvConfig
@@ -82,21 +83,17 @@ def roll_out(scratch: VertiportSim, builder: ObservationBuilder, base: Controlle
 
 
 class ScratchRollouts:
-    """What a model-based controller needs to roll its ``base`` controller out: a scratch copy
-    of the bound env's simulator (without the config's uncertainties when ``nominal``) and its
-    observation builder, both built once per config. Subclasses set ``base`` and ``nominal``;
-    until :meth:`bind`, ``sim`` and the scratch copy are ``None``."""
+    """What a model-based controller needs to roll a controller out: a scratch copy of the bound
+    env's simulator (without the config's uncertainties when ``nominal``) and its observation
+    builder, both built once per config. Subclasses set ``rollout_policy`` (the controller that
+    flies the rollouts) and ``nominal``; until :meth:`bind`, ``sim`` and the scratch copy are
+    ``None``."""
 
-    base: Any
+    rollout_policy: Any
     nominal: bool
     sim: VertiportSim | None = None
     _scratch: VertiportSim | None = None
     _builder: ObservationBuilder | None = None
-
-    @property
-    def rollout_policy(self) -> Any:
-        """The controller that flies the fleet in the rollouts: ``base``."""
-        return self.base
 
     def bind(self, sim: VertiportSim) -> None:
         """Act in the env whose simulator is ``sim``; the controller of the rollouts
@@ -117,7 +114,7 @@ class ScratchRollouts:
             self._scratch = None
 
 
-class RolloutPlanner(ScratchRollouts, Controller):
+class PlannerController(ScratchRollouts, Controller):
     """Chooses, among the legal actions of a vehicle on the ground or hovering, the one whose
     dispatcher rollout earns the most reward; in transit it acts as the dispatcher.
 
@@ -136,7 +133,8 @@ class RolloutPlanner(ScratchRollouts, Controller):
             (a margin keeps near-ties with the dispatcher, which makes the planner's choices
             easier to learn from observations).
         seed: seed of the rollouts' generator (combined with the env's step count).
-        base: the controller rolled out (default: the expert dispatcher).
+        rollout_policy: the controller that flies the rollouts and whose choice is the
+            fallback (default: the expert dispatcher); ``base`` is its name before 0.2.0.
         nominal: simulate rollouts without the config's uncertainties (gusts, charger and
             take-off failures, observation noise); ``False``: with them.
         expect_failures: value a take-off as what it is worth in expectation under the env's
@@ -154,14 +152,22 @@ class RolloutPlanner(ScratchRollouts, Controller):
     (the episode runners in :mod:`agents.controllers.base` do this for any controller with ``bind``).
     """
 
-    name = "rollout"
+    name = "planner"
 
     def __init__(self, horizon: int = 40, terminal_turns: float = 30.0,
                  min_takeoff_battery_pct: float = 80.0, margin: float = 0.0,
                  min_hover_battery_pct: float = 24.0, stranding_penalty: float = 1000.0,
                  seed: int = 0,
-                 base: Controller | None = None, nominal: bool = True,
-                 expect_failures: bool = False, rescue: bool = False) -> None:
+                 rollout_policy: Controller | None = None, nominal: bool = True,
+                 expect_failures: bool = False, rescue: bool = False, **renamed: Any) -> None:
+        renamed = canonical_kwargs(self.name, renamed)
+        unknown = sorted(set(renamed) - {"rollout_policy"})
+        if unknown:
+            raise TypeError(f"PlannerController got unexpected argument(s) {unknown}")
+        if "rollout_policy" in renamed:
+            if rollout_policy is not None:
+                raise TypeError("PlannerController: rollout_policy given twice (once as base)")
+            rollout_policy = renamed["rollout_policy"]
         if horizon < 1:
             raise ValueError(f"horizon must be >= 1 step, got {horizon}")
         if terminal_turns < 0:
@@ -173,7 +179,11 @@ class RolloutPlanner(ScratchRollouts, Controller):
         self.stranding_penalty = float(stranding_penalty)
         self.min_hover_battery_pct = float(min_hover_battery_pct)
         self.seed = int(seed)
-        self.base = base if base is not None else DispatcherController()
+        if isinstance(rollout_policy, str):
+            from agents.controllers.registry import make_controller
+
+            rollout_policy = make_controller(rollout_policy)
+        self.rollout_policy = rollout_policy if rollout_policy is not None else DispatcherController()
         self.nominal = bool(nominal)
         if expect_failures and not self.nominal:
             raise ValueError("expect_failures weighs nominal rollouts; with nominal=False the "
@@ -219,7 +229,7 @@ class RolloutPlanner(ScratchRollouts, Controller):
                   actions: list[int]) -> tuple[dict[int, float], set[int]]:
         """The value of each of ``actions`` (see :meth:`q_values`; each rollout is
         :func:`roll_out`), and those of them whose rollout lost a vehicle."""
-        scratch, builder, base = self._scratch, self._builder, self.base
+        scratch, builder, base = self._scratch, self._builder, self.rollout_policy
         assert scratch is not None and builder is not None
         snap = sim.snapshot()
         q: dict[int, float] = {}
@@ -274,15 +284,15 @@ class RolloutPlanner(ScratchRollouts, Controller):
     def act(self, observation: dict) -> int:
         sim = self.sim
         if sim is None:
-            raise RuntimeError("RolloutPlanner needs the simulator: call bind(env.unwrapped.sim) "
+            raise RuntimeError("PlannerController needs the simulator: call bind(env.unwrapped.sim) "
                                "first (the episode runners of agents.controllers.base do)")
-        fallback = self.base.act(observation)
+        fallback = self.rollout_policy.act(observation)
         self.last_q, self.last_forced = {}, False
         v = sim.acting
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING):
             return fallback
         if not np.array_equal(observation["action_mask"], sim.action_mask(v)):
-            raise RuntimeError("RolloutPlanner: the observation is not that of the bound env's "
+            raise RuntimeError("PlannerController: the observation is not that of the bound env's "
                                "acting vehicle")
         actions = self._with(self.candidates(sim), fallback)
         left_out = self._left_out(sim, actions) if self.rescue else []
@@ -297,3 +307,7 @@ class RolloutPlanner(ScratchRollouts, Controller):
         best = max(q, key=q.get)
         # Keep the dispatcher's choice unless another action is better by more than the margin.
         return fallback if fallback in q and q[fallback] + self.margin >= q[best] else int(best)
+
+
+#: The class's name before 0.2.0.
+RolloutPlanner = PlannerController

@@ -1,26 +1,28 @@
-"""Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``heuristic``,
-``rollout`` (the look-ahead planner, which reads the simulator), ``guard`` (a controller,
-the dispatcher by default, with a look-ahead guard against lost vehicles), ``gcn``
-(the shipped trained policy), ``handback`` (the shipped policy handed back to the dispatcher
-near a loss: the guard around ``gcn``), ``package.module:Class`` or ``path/to/file.py:Class`` (a class,
-or a ready object; modules and files resolve from the working directory, as under
-``python -m``), the path
-of a training checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
-:class:`agents.controllers.gcn.GCNEnsemble`).
+"""Controllers by name, import path or checkpoint: ``random``, ``fcfs``, ``dispatcher`` (the
+expert rule), ``planner`` (a one-step look-ahead planner, which reads the simulator), ``guard``
+(a proposer, the dispatcher by default, whose choices a look-ahead may veto to lose fewer
+vehicles), ``gcn`` (the shipped trained policy, from the observation alone), ``lookahead``
+(the learned ATC as shipped: a look-ahead search around a proposer, ``gcn`` by default),
+``package.module:Class`` or ``path/to/file.py:Class`` (a class, or a ready object; modules and
+files resolve from the working directory, as under ``python -m``), the path of a training
+checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
+:class:`agents.controllers.gcn.GCNEnsemble`). The names before 0.2.0 (``heuristic``,
+``rollout``, ``handback``) still work, with a note (:mod:`agents.common.names`).
 
 A built-in name or an import path may carry constructor arguments in brackets, values read as
-YAML: ``heuristic[holding=false]``, ``rollout[horizon=80,nominal=false]``,
+YAML: ``dispatcher[holding=false]``, ``planner[horizon=80,nominal=false]``,
 ``examples.custom_agent:ChargeFirst[low_battery_pct=40]``; an argument that names a controller
-may carry brackets of its own: ``handback[fleet=heuristic[arrival_priority_pct=40]]``. The
+may carry brackets of its own: ``lookahead[rollout_policy=dispatcher[arrival_priority_pct=40]]``. The
 whole spec (arguments included) names the controller in tables, so two settings of one
 controller can be compared side by side.
-Quote it in a shell (``'heuristic[holding=false]'``): brackets are glob characters."""
+Quote it in a shell (``'dispatcher[holding=false]'``): brackets are glob characters."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
+from agents.common.names import canonical_spec
 from agents.common.specs import (  # noqa: F401 (re-exported: part of the registry's API)
     SHIPPED_CHECKPOINT, AgentSpecError, split_spec,
 )
@@ -29,22 +31,22 @@ from agents.common.specs import (  # noqa: F401 (re-exported: part of the regist
 BUILTIN = {
     "random": "agents.controllers.random_agent:RandomController",
     "fcfs": "agents.controllers.fcfs:FCFSController",
-    "heuristic": "agents.controllers.dispatcher:DispatcherController",
-    "rollout": "agents.controllers.planner:RolloutPlanner",
-    "guard": "agents.controllers.guard:GuardedController",
-    "handback": "agents.controllers.handback:HandbackController",
+    "dispatcher": "agents.controllers.dispatcher:DispatcherController",
+    "planner": "agents.controllers.planner:PlannerController",
+    "guard": "agents.controllers.guard:GuardController",
+    "lookahead": "agents.controllers.lookahead:LookaheadController",
 }
 
 
 def agent_help() -> str:
     """What an agent spec may be, for the ``--help`` of every command that takes one."""
     names = ", ".join([*BUILTIN, "gcn"])
-    return (f"a built-in name ({names}; gcn is the shipped checkpoint, handback the same "
-            "handed back to the dispatcher near a loss), the path of a training "
+    return (f"a built-in name ({names}; gcn is the shipped checkpoint, lookahead the learned "
+            "ATC: a look-ahead search around it), the path of a training "
             "checkpoint (.pt), checkpoints joined by '+' (their ensemble), an import path "
             "'package.module:Class' or a file 'path/to/file.py:Class' (both from the working "
             "directory); constructor arguments "
-            "in brackets, e.g. 'heuristic[holding=false]'")
+            "in brackets, e.g. 'dispatcher[holding=false]'")
 
 
 def _import(path: str, spec: str) -> Any:
@@ -65,11 +67,13 @@ def _checkpoint_path(spec: str) -> Path:
 
 
 def make_controller(spec: str) -> Any:
-    """Build the controller named by ``spec``.
+    """Build the controller named by ``spec`` (a name from before 0.2.0 is read as its new
+    name, with a note).
 
     Raises:
         AgentSpecError: unknown name, import failure, or an object without ``act``.
     """
+    spec = canonical_spec(spec)
     if "+" in spec and all(p.endswith(".pt") or p == "gcn" for p in spec.split("+")):
         from agents.controllers.gcn import CheckpointError, GCNEnsemble
 

@@ -6,7 +6,7 @@ as horizontal lines.
 Usage::
 
     python -m agents.curves                                   # scratch, 3 seeds (make curves)
-    python -m agents.curves --configs scratch scratch_independent scratch_single --seeds 3
+    python -m agents.curves --configs scratch configs/train/ppo_stage/long.yaml --seeds 3
     python -m agents.curves --configs scratch --seeds 2 --iterations 2 --baseline-episodes 0
     python -m agents.curves --configs scratch --backend ray --ray-address auto
 
@@ -55,8 +55,8 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
                         help="the first training seed (default 0)")
     parser.add_argument("--iterations", type=int, default=None, metavar="N",
                         help="override every config's PPO iterations")
-    parser.add_argument("--baselines", nargs="*", default=["fcfs", "heuristic"], metavar="AGENT",
-                        help="controllers drawn as horizontal lines (default: fcfs heuristic)")
+    parser.add_argument("--baselines", nargs="*", default=["fcfs", "dispatcher"], metavar="AGENT",
+                        help="controllers drawn as horizontal lines (default: fcfs dispatcher)")
     parser.add_argument("--baseline-episodes", type=int, default=20, metavar="N",
                         help="validation days per baseline and scenario (default 20; 0: none)")
     parser.add_argument("--workers", type=int, default=2, metavar="N",

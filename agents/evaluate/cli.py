@@ -7,11 +7,11 @@ many worker processes run them, nor on whether they run here or on a Ray cluster
 
 Usage::
 
-    python -m agents.evaluate --agents random fcfs heuristic --episodes 50 --out runs/eval
+    python -m agents.evaluate --agents random fcfs dispatcher --episodes 50 --out runs/eval
     python -m agents.evaluate --agents random --episodes 3 --set schedule.episode_steps=60
-    python -m agents.evaluate --agents random fcfs heuristic --out docs/results \\
+    python -m agents.evaluate --agents random fcfs dispatcher --out docs/results \\
         --report docs/results.md
-    python -m agents.evaluate --agents fcfs heuristic --episodes 1000 --backend ray \\
+    python -m agents.evaluate --agents fcfs dispatcher --episodes 1000 --backend ray \\
         --ray-address auto        # on the Ray cluster this machine belongs to (docs/scaling.md)
 
 Outputs in ``--out``: ``episodes.csv``, ``summary.csv``, ``results.json``, ``case_study.png``,

@@ -38,6 +38,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from agents.common.files import write_atomic
+from agents.common.names import canonical_agents, canonical_spec
 from agents.evaluate.stats import bootstrap_ci
 from agents.evaluate.unforced import DEFAULT_REFERENCE, Day, unforced_losses
 
@@ -51,8 +52,10 @@ class PairedInputError(ValueError):
 
 def read_episodes(paths: Sequence[str | Path]) -> dict[str, dict[Day, dict[str, float]]]:
     """Per agent, per day ``(case, seed)``, the metrics of its episode, from ``episodes.csv``
-    files of ``python -m agents.evaluate``. A day an agent played twice with different
-    results (files that contradict each other) raises :class:`PairedInputError`."""
+    files of ``python -m agents.evaluate``; agents labelled by their names before 0.2.0
+    (``heuristic``, ``rollout``, ``handback``) under their names now. A day an agent played
+    twice with different results (files that contradict each other) raises
+    :class:`PairedInputError`."""
     out: dict[str, dict[Day, dict[str, float]]] = {}
     for path in paths:
         path = Path(path)
@@ -70,9 +73,10 @@ def read_episodes(paths: Sequence[str | Path]) -> dict[str, dict[Day, dict[str, 
                     except (TypeError, ValueError):
                         raise PairedInputError(f"{path}, line {n}: a seed or metric is not a "
                                                f"number") from None
-                    known = out.setdefault(row["agent"], {})
+                    agent = canonical_spec(row["agent"], note=False)  # names before 0.2.0
+                    known = out.setdefault(agent, {})
                     if day in known and known[day] != values:
-                        raise PairedInputError(f"{path}, line {n}: {row['agent']} on {day[0]}, "
+                        raise PairedInputError(f"{path}, line {n}: {agent} on {day[0]}, "
                                                f"seed {day[1]}, differs from another file's row")
                     known[day] = values
         except OSError as exc:
@@ -199,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("episodes", nargs="+", help="episodes.csv files of agents.evaluate")
     parser.add_argument("--pair", nargs=2, action="append", required=True,
                         metavar=("BASE", "CANDIDATE"), help="agents to compare, as named in the "
-                        "files; repeat for several pairs (a pooled row is added)")
+                        "files (or by their names before 0.2.0); repeat for several pairs (a "
+                        "pooled row is added)")
     parser.add_argument("--reference", nargs="+", metavar="AGENT",
                         help="the reference set of unforced losses (default: those of "
                              f"{', '.join(DEFAULT_REFERENCE)} the files hold)")
@@ -207,9 +212,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         episodes = read_episodes(args.episodes)
-        reference = (args.reference if args.reference is not None
+        reference = (list(canonical_agents(args.reference)) if args.reference is not None
                      else [a for a in DEFAULT_REFERENCE if a in episodes])
-        rows = compare(episodes, [tuple(p) for p in args.pair], reference)
+        rows = compare(episodes, [canonical_agents(p) for p in args.pair], reference)
     except PairedInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

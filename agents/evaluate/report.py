@@ -42,8 +42,8 @@ out of service for the rest of the day; the paper's battery depletions); *lost o
 counts eVTOLs left on a normal port with a battery from which no flight the ATC may clear
 reaches a charger (they never serve again that day); *service lost* adds up the minutes from
 each loss to the end of the day. *Unforced losses/day* are, on each day, the vehicles an agent
-lost beyond the fewest that any reference agent (the dispatcher `heuristic` and the look-ahead
-planner `rollout`, those of them evaluated) lost on the same day, averaged over the days a
+lost beyond the fewest that any reference agent (`dispatcher`, `planner` and `guard`, those
+of them evaluated) lost on the same day, averaged over the days a
 reference agent played (n/a where none did); a loss every reference agent suffers too is forced
 by the day. *Landings below reserve* count completed trips that touched down with less battery
 than the config's landing reserve (`battery.landing_reserve_pct`; 0 unless the config sets one,

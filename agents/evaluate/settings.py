@@ -9,11 +9,12 @@ from typing import Any, Iterable
 
 import yaml
 
+from agents.common.names import canonical_agents, upgrade_agents
 from agents.common.seeds import evaluation_seeds, seeds_rule
 from agents.execution.base import INTERRUPTED  # noqa: F401 (the error of a run stopped with Ctrl-C)
 from marl_vertiport.config import LATEST_RULES
 
-DEFAULT_AGENTS = ("random", "fcfs", "heuristic")
+DEFAULT_AGENTS = ("random", "fcfs", "dispatcher")
 #: The paper's case 1 (no uncertainty) and case 2 (wind gusts, charger and take-off failures).
 DEFAULT_CONFIGS = ("paper", "paper_uncertain")
 BOOTSTRAP_RESAMPLES = 2000
@@ -48,6 +49,9 @@ class SuiteConfig:
     episodes: int = 50
     """Days per agent and case when ``seeds`` is not given."""
 
+    #: Agents named as before 0.2.0 read as their names now, with a note.
+    upgrade_data = classmethod(upgrade_agents)
+
 
 def load_suite(spec: str | Path) -> SuiteConfig:
     """A suite by name (configs/suites/) or YAML path; errors name the file and the key."""
@@ -81,6 +85,10 @@ class EvalSettings:
     ``EVAL_SEEDS[:episodes]``."""
     rules: int = LATEST_RULES
     """The env's rules version (``--rules``; ``vertiport_v{rules}``)."""
+
+    def __post_init__(self) -> None:
+        # Agents named as before 0.2.0 play, and are labelled, under their names now.
+        object.__setattr__(self, "agents", canonical_agents(self.agents))
 
     @property
     def seeds(self) -> tuple[int, ...]:

@@ -25,7 +25,7 @@ from agents.evaluate.stats import describe
 Day = tuple[str, int]  # (case, seed)
 #: The reference set of unforced losses when ``--reference`` is not given: those of these
 #: agents the files hold (the dispatcher, the look-ahead planner and the look-ahead guard).
-DEFAULT_REFERENCE = ("heuristic", "rollout", "guard")
+DEFAULT_REFERENCE = ("dispatcher", "planner", "guard")
 
 
 def unforced_losses(episodes: dict[str, dict[Day, dict[str, float]]], agent: str, day: Day,

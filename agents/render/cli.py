@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m agents.render --agent heuristic --config paper --out runs/render/heuristic_paper.gif
+    python -m agents.render --agent dispatcher --config paper --out runs/render/dispatcher_paper.gif
     python -m agents.render --agent random --start-minute 360 --minutes 120 --every 2 --out x.gif
 
 The controller runs through the AEC env exactly as in evaluation (``run_episode`` with the

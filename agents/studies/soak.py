@@ -69,8 +69,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m agents.studies.so
     parser.add_argument("--days", type=int, default=40, help="days per layout (default: 40)")
     parser.add_argument("--configs", nargs="+", default=["paper", "small", "mid", "twin", "wide", "large"],
                         help="env configs, each with every uncertainty high")
-    parser.add_argument("--agents", nargs="+", default=["random", "heuristic"],
-                        help="controllers, taking the days in turn (default: random heuristic)")
+    parser.add_argument("--agents", nargs="+", default=["random", "dispatcher"],
+                        help="controllers, taking the days in turn (default: random dispatcher)")
     parser.add_argument("--rss-slack-mb", type=float, default=50.0,
                         help="allowed RSS growth after the warm-up, MB (default: 50)")
     args = parser.parse_args(argv)

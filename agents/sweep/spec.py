@@ -3,7 +3,7 @@ of config overrides and the evaluation days; its grid points and its episode tas
 
 A sweep file::
 
-    agents: [fcfs, heuristic]          # as for agents.evaluate
+    agents: [fcfs, dispatcher]         # as for agents.evaluate
     configs: [paper]                   # env configs (names or YAML paths)
     grid:                              # every combination of these values is a point
       uncertainty.wind_gust_prob: [0.0, 0.05, 0.1, 0.2]
@@ -25,6 +25,7 @@ from typing import Any
 
 import yaml
 
+from agents.common.names import canonical_agents
 from agents.common.seeds import EVAL_SEEDS, evaluation_seeds, parse_seed_range, seeds_rule
 from agents.evaluate.settings import EpisodeTask, InputError, Overrides
 from marl_vertiport.config import ConfigError, find_yaml
@@ -132,7 +133,7 @@ def parse_sweep(data: Any, name: str, where: str) -> SweepSpec:
         raise InputError(f"{where}: {unknown[0]}: unknown key (known: {', '.join(_KEYS)})")
     if "agents" not in data:
         raise InputError(f"{where}: agents: missing (the controllers to compare)")
-    agents = _strings(data["agents"], "agents", where)
+    agents = canonical_agents(_strings(data["agents"], "agents", where))  # names before 0.2.0
     configs = _strings(data.get("configs", ["paper"]), "configs", where)
     grid = parse_grid(data.get("grid"), where)
     fixed = data.get("set") or {}

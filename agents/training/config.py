@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.common.names import RENAMED_TEACHERS, note_renamed, upgrade_agents
 from agents.controllers.gcn import GRAPH_ACTOR
 from agents.training.fit_selection import KEEP_RULES
 from agents.training.teachers import TEACHERS
@@ -30,20 +31,20 @@ class PretrainConfig:
     """Extra episodes per round that cover only the start of a day."""
     start_steps: int = 120
     """Steps of each of those episodes."""
-    teacher: str = "rollout"
-    """``rollout`` (the look-ahead planner), ``guarded_rollout`` or ``heuristic`` (the expert
-    dispatcher): :mod:`agents.training.teachers`."""
-    rollout_horizon: int = 40
-    """Steps the rollout teacher simulates per candidate action."""
-    rollout_margin: float = 3.0
-    """Reward by which the rollout teacher's best action must beat the dispatcher's to be the
-    label (near-ties keep the dispatcher's choice, which is easier to learn)."""
-    rollout_expect_failures: bool = False
+    teacher: str = "planner"
+    """``planner`` (the look-ahead planner), ``guarded_planner`` (the planner behind the guard)
+    or ``dispatcher`` (the expert dispatcher): :mod:`agents.training.teachers`."""
+    planner_horizon: int = 40
+    """Steps the planner simulates per candidate action."""
+    planner_margin: float = 3.0
+    """Reward by which the planner's best action must beat the dispatcher's to be the label
+    (near-ties keep the dispatcher's choice, which is easier to learn)."""
+    planner_expect_failures: bool = False
     """The planner values a take-off in expectation over its failure (``expect_failures`` of
-    :class:`~agents.controllers.planner.RolloutPlanner`; configs with take-off failures)."""
-    rollout_rescue: bool = False
+    :class:`~agents.controllers.planner.PlannerController`; configs with take-off failures)."""
+    planner_rescue: bool = False
     """The planner simulates the actions its candidates leave out where every candidate loses a
-    vehicle (``rescue`` of :class:`~agents.controllers.planner.RolloutPlanner`)."""
+    vehicle (``rescue`` of :class:`~agents.controllers.planner.PlannerController`)."""
     workers: int = 2
     """Processes that run demonstration days."""
     epochs: int = 6
@@ -74,6 +75,22 @@ class PretrainConfig:
     score of the full days it drove in the round after its fit (each fit on days of its own);
     ``paired``, the best by its score on the last round's full days, which every fit drives
     (the same days for all: more days driven, a fairer comparison); ``last``, the last fit."""
+
+    @classmethod
+    def upgrade_data(cls, data: dict) -> dict:
+        """Keys and teachers named as before 0.2.0 (``rollout_horizon``, ``teacher: rollout``)
+        read as their names now, with a note."""
+        for old in [k for k in data if isinstance(k, str) and k.startswith("rollout_")]:
+            new = "planner_" + old[len("rollout_"):]
+            if new in data:
+                raise ConfigError(f"pretrain.{old}: the old name of pretrain.{new}; give one")
+            note_renamed(f"pretrain.{old}", f"pretrain.{new}", "train-config key")
+            data[new] = data.pop(old)
+        teacher = data.get("teacher")
+        if isinstance(teacher, str) and teacher in RENAMED_TEACHERS:
+            note_renamed(teacher, RENAMED_TEACHERS[teacher], "pretrain.teacher")
+            data["teacher"] = RENAMED_TEACHERS[teacher]
+        return data
 
 
 @dataclass(frozen=True)
@@ -124,8 +141,11 @@ class ModelConfig:
 class EvaluationConfig:
     episodes: int = 20
     """Held-out episodes per case for the evaluation at the end of training (0: none)."""
-    agents: tuple[str, ...] = ("random", "fcfs", "heuristic")
+    agents: tuple[str, ...] = ("random", "fcfs", "dispatcher")
     """Baselines evaluated beside the learned policy."""
+
+    #: Agents named as before 0.2.0 read as their names now, with a note.
+    upgrade_data = classmethod(upgrade_agents)
 
 
 @dataclass(frozen=True)
@@ -248,7 +268,7 @@ class TrainConfig:
             (self.pretrain.starts >= 0 and self.pretrain.start_steps >= 1, "pretrain.starts",
              "starts must be >= 0 and start_steps >= 1"),
             (self.pretrain.teacher in TEACHERS, "pretrain.teacher", f"one of {', '.join(TEACHERS)}"),
-            (self.pretrain.rollout_horizon >= 1, "pretrain.rollout_horizon", "must be >= 1"),
+            (self.pretrain.planner_horizon >= 1, "pretrain.planner_horizon", "must be >= 1"),
             (self.pretrain.workers >= 1, "pretrain.workers", "must be >= 1"),
             (self.pretrain.regret_cap >= 0, "pretrain.regret_cap", "must be >= 0"),
             (self.pretrain.keep in KEEP_RULES, "pretrain.keep", f"one of {', '.join(KEEP_RULES)}"),

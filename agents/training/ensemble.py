@@ -1,8 +1,8 @@
 """Distillation of an ensemble of imitation fits into the actor (after the warm start).
 
 Fits of the same demonstrations from different initial weights play quite differently (up to
-about 300 points a day apart on the same days; docs/training.md, "Is it the stage, or the
-fit?"), so one warm start is one draw from a lottery. This stage averages the lottery out:
+about 300 points a day apart on the same days; experiments/ensemble-warm-start-rules-v0, "Is it
+the stage, or the fit?"), so one warm start is one draw from a lottery. This stage averages the lottery out:
 
 1. **Refits.** The warm start's decisions (``warmstart_state.pt``) are fit ``ensemble.fits``
    more times, each from weights drawn afresh with seed ``REFIT_SEED_BASE + k`` and otherwise
@@ -32,7 +32,7 @@ import torch
 
 from agents.common.seeds import ENSEMBLE_SEED_BASE, training_seed
 from agents.execution import Backend, LocalBackend
-from agents.training.imitation import DecisionLog, _learner, collect, fit_actor, to_tensordict
+from agents.training.imitation import DemonstrationLog, _learner, collect, fit_actor, to_tensordict
 
 #: Offset of the refits' seeds: refit ``k`` draws its weights and batches with ``REFIT_SEED_BASE + k``.
 REFIT_SEED_BASE = 1000
@@ -67,7 +67,7 @@ class EnsembleDriver:
     the state is logged with its action as the label; a step without one takes its one legal
     action."""
 
-    def __init__(self, ensemble: Any, log: DecisionLog) -> None:
+    def __init__(self, ensemble: Any, log: DemonstrationLog) -> None:
         self.ensemble, self.log = ensemble, log
 
     def act(self, obs: dict) -> int:
@@ -91,7 +91,7 @@ def drive_day(task: EnsembleDay) -> tuple[dict[str, np.ndarray], dict[str, Any]]
 
     torch.set_num_threads(1)
     env = VertiportEnv(config=from_dict(task.env_config))
-    log = DecisionLog()
+    log = DemonstrationLog()
     metrics = run_episode(env, EnsembleDriver(GCNEnsemble(list(task.members)), log), task.seed,
                           max_steps=task.steps)
     env.close()

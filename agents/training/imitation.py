@@ -50,10 +50,10 @@ class DayTask:
     seed: int
     steps: int
     teacher: str
-    rollout_horizon: int
-    rollout_margin: float = 0.0
+    planner_horizon: int
+    planner_margin: float = 0.0
     planner_options: dict[str, Any] = dataclasses.field(default_factory=dict)
-    """Options of the planner of a rollout teacher
+    """Options of the planner of a planner teacher
     (:data:`~agents.training.teachers.PLANNER_OPTIONS`)."""
     learner: dict[str, Any] | None = None
     """Checkpoint content of the actor that drives (DAgger); ``None``: the teacher drives."""
@@ -65,8 +65,8 @@ class DayTask:
     that drives it): no teacher runs and no decisions are returned."""
 
 
-class DecisionLog:
-    """The decisions of a day with a choice (two or more legal actions): each observation's
+class DemonstrationLog:
+    """The demonstrations of a day: the decisions with a choice (two or more legal actions): each observation's
     groups, its label and its weight; as arrays by :meth:`arrays`."""
 
     def __init__(self) -> None:
@@ -107,7 +107,7 @@ class Demonstrator:
     simulator at the start of the day; it keeps the seed it was made with."""
 
     def __init__(self, teacher: Any, learner: Any, noise: float, noise_rng: np.random.Generator,
-                 log: DecisionLog) -> None:
+                 log: DemonstrationLog) -> None:
         self.teacher, self.learner, self.noise, self.noise_rng = teacher, learner, noise, noise_rng
         self.log = log
         self.label = 0
@@ -152,10 +152,10 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     if not task.labelled and task.learner is None:
         raise ValueError("a day without labels needs a learner to drive it")
     env = VertiportEnv(config=from_dict(task.env_config))
-    teacher = (make_teacher(task.teacher, task.rollout_horizon, task.rollout_margin, task.seed,
+    teacher = (make_teacher(task.teacher, task.planner_horizon, task.planner_margin, task.seed,
                             **task.planner_options) if task.labelled else None)
     learner = GCNController(task.learner) if task.learner is not None else None
-    log = DecisionLog()
+    log = DemonstrationLog()
     driver = Demonstrator(teacher, learner, task.noise, np.random.default_rng([task.seed, 1]), log)
     metrics = run_episode(env, driver, task.seed, max_steps=task.steps)
     env.close()
@@ -314,9 +314,9 @@ def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: 
                   for i in range(pre.low_battery_starts)]
         lengths += [pre.start_steps] * len(levels)
         configs += [_with_battery(scenarios[i % len(scenarios)], pct) for i, pct in enumerate(levels)]
-    options = {k: True for k in PLANNER_OPTIONS if getattr(pre, f"rollout_{k}")}
-    return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.rollout_horizon,
-                    pre.rollout_margin, options, learner, pre.noise if d >= pre.days else 0.0,
+    options = {k: True for k in PLANNER_OPTIONS if getattr(pre, f"planner_{k}")}
+    return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.planner_horizon,
+                    pre.planner_margin, options, learner, pre.noise if d >= pre.days else 0.0,
                     labelled=not last)
             for d, (conf, steps) in enumerate(zip(configs, lengths))]
 

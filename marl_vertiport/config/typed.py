@@ -4,7 +4,9 @@ checked, and the errors that name the field.
 Every schema of the project loads through here: the env config
 (:mod:`marl_vertiport.config.env`), train configs, evaluation suites, checks. A YAML file may
 extend another with ``base: <name or path>``; an unknown key names the known ones; a dotted
-override (``uncertainty.wind_gust_prob``) sets one field of a nested schema.
+override (``uncertainty.wind_gust_prob``) sets one field of a nested schema. A schema whose keys
+or values were renamed gives a classmethod ``upgrade_data(data) -> data`` that reads the old
+names as the new ones; it is called on the plain data before any check.
 """
 
 from __future__ import annotations
@@ -90,12 +92,20 @@ def _build(cls: type, data: Any, where: str) -> Any:
         return data
     if not isinstance(data, dict):
         raise ConfigError(f"{where or 'config'}: expected a mapping, got {data!r}")
+    upgrade = getattr(cls, "upgrade_data", None)
+    if upgrade is not None:
+        data = upgrade(dict(data))
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted((k for k in data if k not in names), key=str)
     if unknown:
         prefix = f"{where}." if where else ""
         raise ConfigError(f"{prefix}{unknown[0]}: unknown key (known: {', '.join(sorted(names))})")
+    missing = [f.name for f in dataclasses.fields(cls) if f.name not in data
+               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if missing:
+        prefix = f"{where}." if where else ""
+        raise ConfigError(f"{prefix}{missing[0]}: missing (it has no default)")
     kwargs = {}
     for key, value in data.items():
         kwargs[key] = _coerce(value, hints[key], f"{where}.{key}" if where else key)

@@ -288,7 +288,7 @@ def test_bound_dispatcher_counts_turns_in_minutes_where_the_atc_decides_twice_a_
 
 @pytest.mark.slow
 @pytest.mark.parametrize("config", ["paper", "paper_uncertain"])
-@pytest.mark.parametrize("name", ["fcfs", "heuristic"])
+@pytest.mark.parametrize("name", ["fcfs", "dispatcher"])
 def test_full_days_with_only_legal_actions(config, name):
     env = vertiport_v1.env(config=config)
     metrics = run_aec_episode(env, make_controller(name), EVAL_SEEDS[0])  # raises if illegal
@@ -299,20 +299,20 @@ def test_full_days_with_only_legal_actions(config, name):
 def test_ordering_random_fcfs_heuristic_on_fixed_seeds():
     seeds = EVAL_SEEDS[900:903]
     means = {}
-    for name in ("random", "fcfs", "heuristic"):
+    for name in ("random", "fcfs", "dispatcher"):
         rewards = []
         for config in ("paper", "paper_uncertain"):
             env = vertiport_v1.env(config=config)
             rewards += [run_aec_episode(env, make_controller(name), s)["total_reward"] for s in seeds]
         means[name] = np.mean(rewards)
-    assert means["random"] < means["fcfs"] < means["heuristic"], means
+    assert means["random"] < means["fcfs"] < means["dispatcher"], means
 
 
 def test_the_same_controller_runs_through_both_apis():
     aec = run_aec_episode(vertiport_v1.env(config="paper", **{"schedule.episode_steps": 200}),
-                          make_controller("heuristic"), 5)
+                          make_controller("dispatcher"), 5)
     gym = run_gym_episode(VertiportEnv(config="paper", **{"schedule.episode_steps": 200}),
-                          make_controller("heuristic"), 5)
+                          make_controller("dispatcher"), 5)
     assert aec == gym
 
 

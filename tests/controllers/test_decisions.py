@@ -27,7 +27,7 @@ def _day(spec, config, seed, steps=None, log=True):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("spec, config", [("gcn", "paper_uncertain"), ("heuristic", "paper")])
+@pytest.mark.parametrize("spec, config", [("gcn", "paper_uncertain"), ("dispatcher", "paper")])
 def test_the_log_changes_nothing_and_explains_every_masked_action(spec, config):
     with_log, log, env = _day(spec, config, 1000004)
     without, _, _ = _day(spec, config, 1000004, log=False)
@@ -57,10 +57,10 @@ def test_the_log_changes_nothing_and_explains_every_masked_action(spec, config):
 
 
 def test_the_handed_back_atc_logs_who_decided_and_the_policys_own_choice():
-    _, log, _ = _day("handback", "paper", 1000002, steps=200)
+    _, log, _ = _day("lookahead", "paper", 1000002, steps=200)
     by = {r["decided_by"] for r in log.rows}
-    assert "handback: gcn:gcn_default.pt" in by and "handback: heuristic" in by
-    handed = [r for r in log.rows if r["decided_by"] == "handback: heuristic" and r["legal"] > 1]
+    assert "lookahead: gcn:gcn_default.pt" in by and "lookahead: dispatcher" in by
+    handed = [r for r in log.rows if r["decided_by"] == "lookahead: dispatcher" and r["legal"] > 1]
     assert handed and all(r["probabilities"] for r in handed)  # the proposal it overruled
     assert any(r["policy_choice"] != r["recommendation_name"] for r in handed)
 
@@ -91,7 +91,7 @@ def test_files_are_written_whole_with_the_same_rows(tmp_path):
 
 def test_rules_have_no_probabilities_and_events_read_as_words():
     obs = {"action_mask": np.array([1, 1, 0], dtype=np.int8)}
-    assert action_probabilities(make_controller("heuristic"), obs) is None
+    assert action_probabilities(make_controller("dispatcher"), obs) is None
     assert format_events({}) == ""
     words = format_events({"takeoff": True, "good_takeoff": True, "contacts": 1,
                            "vehicles_lost": 2, "action": 3, "commanded_action": 4}, lost=[1, 3])

@@ -7,9 +7,9 @@ import pytest
 from agents.controllers.base import HOVER_SPOT, HOVERING, Observation
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.episode import run_episode
-from agents.controllers.guard import GuardedController
+from agents.controllers.guard import GuardController
 from agents.controllers.registry import make_controller
-from helpers import FixedAction, dispatcher_decision
+from helpers import FixedAction, dispatcher_decision, guarded_actions
 from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
 from marl_vertiport.sim.schema import ON_CHARGER, ON_PORT
@@ -30,21 +30,6 @@ class _KeepsHolding(DispatcherController):
         return super().act(observation)
 
 
-def _guarded_actions(env, guard, seed: int) -> list[int]:
-    """The actions ``guard`` takes on day ``seed`` of ``env``, bound to its simulator."""
-    actions = []
-    env.reset(seed=seed)
-    guard.reset(seed=seed)
-    guard.bind(env.unwrapped.sim)
-    for agent in env.agent_iter():
-        if env.terminations[agent] or env.truncations[agent]:
-            env.step(None)
-            continue
-        actions.append(guard.act(env.observe(agent)))
-        env.step(actions[-1])
-    return actions
-
-
 def _dispatcher_day_to_a_choice(env, min_legal: int):
     """Day 0 of ``env`` flown by the dispatcher up to a decision of a vehicle on a port, on a
     charger or hovering with at least ``min_legal`` legal actions: (the dispatcher, bound to
@@ -60,7 +45,7 @@ def test_guard_keeps_the_vehicles_its_base_loses():
     changes = 0
     for seed in range(3):
         lost["base"] += run_episode(env, _KeepsHolding(), seed=seed)["stranded"]
-        guard = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True)
+        guard = GuardController(proposer=_KeepsHolding(), horizon_min=30, nominal=True)
         lost["guard"] += run_episode(env, guard, seed=seed)["stranded"]
         changes += guard.changes
         guard.close()
@@ -74,7 +59,7 @@ def test_guard_compares_every_legal_action_when_the_base_loses_one(prefer):
     env = vertiport_v1.env(config="paper")
     env.reset(seed=0)
     sim = env.unwrapped.sim
-    guard = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True, prefer=prefer)
+    guard = GuardController(proposer=_KeepsHolding(), horizon_min=30, nominal=True, prefer=prefer)
     col = {"reward": 1, "margin": 2}[prefer]  # the column of last_values preferred
     guard.reset(seed=0)
     guard.bind(sim)
@@ -91,14 +76,14 @@ def test_guard_compares_every_legal_action_when_the_base_loses_one(prefer):
         if guard.last_values:  # a full comparison: every legal action, the base's losing one
             values = guard.last_values
             assert set(values) == set(np.flatnonzero(obs["action_mask"]).tolist())
-            choice = guard.base.act(obs)
+            choice = guard.proposer.act(obs)
             fewest = min(v[0] for v in values.values())
-            assert values[choice][0] >= guard.min_lost and values[action][0] == fewest
+            assert values[choice][0] >= guard.settings.min_lost and values[action][0] == fewest
             if action != choice:  # of the actions that lose the fewest, the preferred one
                 assert values[action][col] == max(v[col] for v in values.values()
                                                   if v[0] == fewest)
         # As a teacher: a changed decision ruled the base's choice out as unsafe.
-        assert guard.last_forced == guard.last_changed == (action != guard.base.act(obs))
+        assert guard.last_forced == guard.last_changed == (action != guard.proposer.act(obs))
         assert guard.last_q == {}  # the base (not a planner) simulates no candidates
         env.step(action)
     assert guard.changes > 0
@@ -109,7 +94,7 @@ def test_guard_compares_every_legal_action_when_the_base_loses_one(prefer):
 def test_guard_keeps_the_base_choice_and_goes_quiet():
     env = VertiportEnv("paper")
     obs, _ = env.reset(seed=4)
-    guard = GuardedController(horizon_min=10, samples=1, nominal=True, quiet_pct=0.0,
+    guard = GuardController(horizon_min=10, samples=1, nominal=True, quiet_pct=0.0,
                               quiet_min=5.0)
     guard.reset(seed=4)
     guard.bind(env.sim)
@@ -135,37 +120,37 @@ def test_guarded_dispatcher_loses_fewer_vehicles_than_the_dispatcher():
     vehicles in a queue for the one charging port; the guard keeps them."""
     env = vertiport_v1.env(config="paper_uncertain_10", **{"schedule.episode_steps": 480})
     lost = {name: run_episode(env, make_controller(name), seed=800029)["stranded"]
-            for name in ("heuristic", "guard")}
+            for name in ("dispatcher", "guard")}
     env.close()
-    assert lost["heuristic"] >= 2
-    assert lost["guard"] < lost["heuristic"]
+    assert lost["dispatcher"] >= 2
+    assert lost["guard"] < lost["dispatcher"]
 
 
 def test_arguments_and_unbound_use():
     with pytest.raises(RuntimeError, match="bind"):
-        GuardedController().act({"action_mask": np.ones(14, np.int8)})
+        GuardController().act({"action_mask": np.ones(14, np.int8)})
     with pytest.raises(ValueError, match="horizon_min"):
-        GuardedController(horizon_min=0)
+        GuardController(horizon_min=0)
     with pytest.raises(ValueError, match="samples"):
-        GuardedController(samples=0)
+        GuardController(samples=0)
     with pytest.raises(ValueError, match="quiet_min"):
-        GuardedController(quiet_min=-1)
+        GuardController(quiet_min=-1)
     with pytest.raises(ValueError, match="min_lost"):
-        GuardedController(min_lost=0)
+        GuardController(min_lost=0)
     with pytest.raises(ValueError, match="clairvoyant"):
-        GuardedController(clairvoyant=True, nominal=True)
+        GuardController(clairvoyant=True, nominal=True)
     with pytest.raises(ValueError, match="prefer"):
-        GuardedController(prefer="trips")
+        GuardController(prefer="trips")
     assert make_controller("guard").name == "guard"
     for config, runs in (("paper", 1), ("paper_uncertain", 4)):  # one where all runs are alike
         env = vertiport_v1.env(config=config)
-        guard = GuardedController(samples=4)
+        guard = GuardController(samples=4)
         guard.bind(env.unwrapped.sim)
         assert guard._runs == runs
         guard.close()
         env.close()
-    assert make_controller("guard[samples=2]").samples == 2
-    assert isinstance(make_controller("guard[base=fcfs]").base, make_controller("fcfs").__class__)
+    assert make_controller("guard[samples=2]").settings.samples == 2
+    assert isinstance(make_controller("guard[proposer=fcfs]").proposer, make_controller("fcfs").__class__)
 
 
 @pytest.mark.parametrize("prefer, wanted", [("reward", 0), ("margin", 1)])
@@ -175,10 +160,10 @@ def test_of_the_actions_that_lose_fewest_the_guard_takes_the_preferred(prefer, w
     env = vertiport_v1.env(config="paper")
     sim = env.unwrapped.sim
     _, obs, legal = _dispatcher_day_to_a_choice(env, 3)
-    guard = GuardedController(nominal=True, prefer=prefer)
+    guard = GuardController(nominal=True, prefer=prefer)
     guard.reset(seed=0)
     guard.bind(sim)
-    choice = guard.base.act(obs)
+    choice = guard.proposer.act(obs)
     others = [a for a in legal if a != choice][:2]
     assert len(others) == 2
     crafted = {choice: (1.0, 90.0, 30.0), others[0]: (0.0, 50.0, 10.0),
@@ -221,35 +206,35 @@ def test_a_fleet_of_its_own_flies_the_rollouts_and_the_base_decides_on_the_env()
     does, every decision is the guard's without it."""
     env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 240})
     base, fleet = _Recorder(), _Recorder()
-    guard = GuardedController(base=base, fleet=fleet, horizon_min=30, nominal=True)
-    plain = GuardedController(base=_KeepsHolding(), horizon_min=30, nominal=True)
-    shared = GuardedController(base=_KeepsHolding(), fleet=_KeepsHolding(), horizon_min=30,
+    guard = GuardController(proposer=base, rollout_policy=fleet, horizon_min=30, nominal=True)
+    plain = GuardController(proposer=_KeepsHolding(), horizon_min=30, nominal=True)
+    shared = GuardController(proposer=_KeepsHolding(), rollout_policy=_KeepsHolding(), horizon_min=30,
                                nominal=True)
     env.reset(seed=0)
     guard.reset(seed=0)
     guard.bind(env.unwrapped.sim)
     assert base.bound is env.unwrapped.sim and fleet.bound is guard._scratch
-    assert guard.rollout_policy is fleet and plain.rollout_policy is plain.base
+    assert guard.rollout_policy is fleet and plain.rollout_policy is plain.proposer
     for seed in range(2):
         got = {}
         for name, g in (("plain", plain), ("shared", shared)):
-            got[name] = (_guarded_actions(env, g, seed), g.changes)
+            got[name] = (guarded_actions(env, g, seed), g.changes)
         assert got["plain"] == got["shared"] and got["plain"][1] > 0
     # The base decides once a turn; the rollouts are the fleet's.
     env.reset(seed=0)
     run_episode(env, guard, seed=0)
     assert guard.checks > 0 and fleet.calls > base.calls > 0
-    assert isinstance(make_controller("guard[base=rollout,fleet=heuristic]").fleet,
+    assert isinstance(make_controller("guard[proposer=planner,rollout_policy=dispatcher]").own_rollout_policy,
                       DispatcherController)
     # A planner's candidate values pass through where its choice stands.
-    planned = make_controller("guard[base=rollout,fleet=heuristic,nominal=true]")
+    planned = make_controller("guard[proposer=planner,rollout_policy=dispatcher,nominal=true]")
     env.reset(seed=0)
     planned.reset(seed=0)
     planned.bind(env.unwrapped.sim)
     seen = 0
     for agent in env.agent_iter(max_iter=60):
         action = planned.act(env.observe(agent))
-        assert planned.last_changed or planned.last_q == planned.base.last_q
+        assert planned.last_changed or planned.last_q == planned.proposer.last_q
         seen += bool(planned.last_q)
         env.step(action)
     assert seen > 0
@@ -263,13 +248,13 @@ def test_defer_pct_hands_the_low_vehicles_to_the_fleet():
     """Below ``defer_pct`` the fleet decides and the base is not asked; at or above it the base
     decides; at 100 % every decision is that of the fleet guarded by itself."""
     with pytest.raises(ValueError, match="defer_pct"):
-        GuardedController(fleet="heuristic", defer_pct=101)
-    with pytest.raises(ValueError, match="fleet"):
-        GuardedController(defer_pct=30)
+        GuardController(rollout_policy="dispatcher", defer_pct=101)
+    with pytest.raises(ValueError, match="rollout_policy"):
+        GuardController(defer_pct=30)
     env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 240})
     sim = env.unwrapped.sim
     base = _Recorder()
-    guard = GuardedController(base=base, fleet=DispatcherController(), horizon_min=30,
+    guard = GuardController(proposer=base, rollout_policy=DispatcherController(), horizon_min=30,
                               nominal=True, defer_pct=60)
     env.reset(seed=1)
     guard.reset(seed=1)
@@ -287,13 +272,13 @@ def test_defer_pct_hands_the_low_vehicles_to_the_fleet():
     assert asked[True] > 0 and asked[False] > 0 and guard.deferrals == asked[True]
     # Deferring every vehicle is the fleet guarded by itself, decision for decision.
     got = []
-    for g in (GuardedController(base=_KeepsHolding(), fleet=DispatcherController(),
+    for g in (GuardController(proposer=_KeepsHolding(), rollout_policy=DispatcherController(),
                                 horizon_min=30, nominal=True, defer_pct=100),
-              GuardedController(base=DispatcherController(), horizon_min=30, nominal=True)):
-        got.append(_guarded_actions(env, g, seed=0))
+              GuardController(proposer=DispatcherController(), horizon_min=30, nominal=True)):
+        got.append(guarded_actions(env, g, seed=0))
         g.close()
     assert got[0] == got[1]
-    assert make_controller("guard[fleet=heuristic,defer_pct=30]").defer_pct == 30
+    assert make_controller("guard[rollout_policy=dispatcher,defer_pct=30]").settings.defer_pct == 30
     guard.close()
     env.close()
 
@@ -307,7 +292,7 @@ def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands)
     fleet, obs, legal = _dispatcher_day_to_a_choice(env, 2)
     own = fleet.act(obs)
     other = next(a for a in legal if a != own)
-    guard = GuardedController(base=FixedAction(other), fleet=fleet, nominal=True,
+    guard = GuardController(proposer=FixedAction(other), rollout_policy=fleet, nominal=True,
                               margin_pct=margin_pct)
     guard.reset(seed=0)
     guard.bind(sim)
@@ -329,7 +314,7 @@ def test_margin_pct_hands_an_unclean_check_to_the_fleet(margin_pct, base_stands)
         guard.reset(seed=0)
         assert guard.act(obs) == own and guard._quiet_until_step == -1
     with pytest.raises(ValueError, match="margin_pct"):
-        GuardedController(margin_pct=10)
+        GuardController(margin_pct=10)
     guard.close()
     env.close()
 
@@ -344,7 +329,7 @@ def test_self_check_hands_a_choice_the_base_itself_would_lose_to_the_fleet():
     own = fleet.act(obs)
     other = next(a for a in legal if a != own)
     for onward_loses in (False, True):
-        guard = GuardedController(base=FixedAction(other), fleet=fleet, nominal=True,
+        guard = GuardController(proposer=FixedAction(other), rollout_policy=fleet, nominal=True,
                                   self_check=True)
         guard.reset(seed=0)
         guard.bind(sim)
@@ -362,17 +347,17 @@ def test_self_check_hands_a_choice_the_base_itself_would_lose_to_the_fleet():
         assert checked == ([(other, False), (other, True), (own, False)] if onward_loses
                            else [(other, False), (other, True)])
         guard.close()
-    with pytest.raises(ValueError, match="fleet"):
-        GuardedController(self_check=True)
+    with pytest.raises(ValueError, match="rollout_policy"):
+        GuardController(self_check=True)
     with pytest.raises(ValueError, match="scratch copy"):
-        GuardedController(base="rollout", fleet="heuristic", self_check=True)
+        GuardController(proposer="planner", rollout_policy="dispatcher", self_check=True)
     env.close()
 
 
 def test_the_self_checks_continuation_is_the_base_above_defer_pct_and_the_fleet_below():
     env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 120})
     base, fleet = FixedAction(0), DispatcherController()
-    guard = GuardedController(base=base, fleet=fleet, nominal=True, defer_pct=50,
+    guard = GuardController(proposer=base, rollout_policy=fleet, nominal=True, defer_pct=50,
                               self_check=True)
     env.reset(seed=0)
     guard.bind(env.unwrapped.sim)
@@ -396,7 +381,7 @@ def test_self_check_keeps_the_vehicles_a_holding_base_loses():
     for self_check in (False, True):
         lost[self_check] = deferrals[self_check] = 0
         for seed in range(2):
-            guard = GuardedController(base=_KeepsHolding(), fleet=DispatcherController(),
+            guard = GuardController(proposer=_KeepsHolding(), rollout_policy=DispatcherController(),
                                       horizon_min=30, nominal=True, self_check=self_check)
             lost[self_check] += run_episode(env, guard, seed=seed)["stranded"]
             deferrals[self_check] += guard.deferrals

@@ -4,7 +4,7 @@ started it at or above, counts as lost there; a vehicle already below counts onl
 import numpy as np
 import pytest
 
-from agents.controllers.guard import GuardedController
+from agents.controllers.guard import GuardController
 from agents.controllers.planner import roll_out
 from agents.controllers.registry import make_controller
 from helpers import dispatcher_decision
@@ -30,14 +30,14 @@ def _counted_by_hand(guard, sim, action: int, floor_pct: float) -> int:
 
 def test_floor_pct_is_validated_and_parsed():
     with pytest.raises(ValueError, match="floor_pct"):
-        GuardedController(floor_pct=-1.0)
+        GuardController(floor_pct=-1.0)
     with pytest.raises(ValueError, match="floor_pct"):
-        GuardedController(floor_pct=101.0)
-    guard = make_controller("handback[floor_pct=15]")
-    assert guard.floor_pct == 15.0
+        GuardController(floor_pct=101.0)
+    guard = make_controller("lookahead[floor_pct=15]")
+    assert guard.settings.floor_pct == 15.0
     guard.close()
-    default = GuardedController()
-    assert default.floor_pct == 0.0
+    default = GuardController()
+    assert default.settings.floor_pct == 0.0
     default.close()
 
 
@@ -53,8 +53,8 @@ def test_the_floor_counts_the_vehicles_that_fall_below_it_as_lost():
     live = sim.battery[~sim.lost]
     floor_pct = float(np.median(live)) + 0.5
     assert (live < floor_pct).any() and (live >= floor_pct).any()
-    guard = GuardedController(nominal=True, floor_pct=floor_pct)
-    plain = GuardedController(nominal=True)
+    guard = GuardController(nominal=True, floor_pct=floor_pct)
+    plain = GuardController(nominal=True)
     for g in (guard, plain):
         g.reset(seed=0)
         g.bind(sim)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from agents.controllers.dispatcher import DispatcherController
-from agents.controllers.guard import GuardedController
+from agents.controllers.guard import GuardController
 from agents.controllers.registry import make_controller
 from helpers import FixedAction, dispatcher_decision
 from marl_vertiport import vertiport_v1
@@ -39,14 +39,14 @@ def _crafted(guard, values):
 
 def test_the_override_arguments_are_validated_and_parsed():
     with pytest.raises(ValueError, match="min_saved"):
-        GuardedController(min_saved=-0.25)
-    guard = make_controller("handback[min_saved=0.5,override_takeoff=false,port_hops=false]")
-    assert guard.min_saved == 0.5 and guard.override_takeoff is False
-    assert guard.port_hops is False
+        GuardController(min_saved=-0.25)
+    guard = make_controller("lookahead[min_saved=0.5,override_takeoff=false,port_hops=false]")
+    assert guard.settings.min_saved == 0.5 and guard.settings.override_takeoff is False
+    assert guard.settings.port_hops is False
     guard.close()
-    default = GuardedController()
-    assert default.min_saved == 0.0 and default.override_takeoff is True
-    assert default.port_hops is True
+    default = GuardController()
+    assert default.settings.min_saved == 0.0 and default.settings.override_takeoff is True
+    assert default.settings.port_hops is True
     default.close()
 
 
@@ -56,7 +56,7 @@ def test_min_saved_is_the_least_gain_an_override_needs(min_saved, changed):
     enough for an override up to ``min_saved=0.5`` and not above."""
     env = vertiport_v1.env(config="paper")
     obs, choice, legal = _decision_with_a_takeoff(env)
-    guard = GuardedController(nominal=True, min_saved=min_saved)
+    guard = GuardController(nominal=True, min_saved=min_saved)
     guard.reset(seed=0)
     guard.bind(env.unwrapped.sim)
     other = next(a for a in legal if a != choice)
@@ -77,7 +77,7 @@ def test_without_override_takeoff_the_guard_starts_no_trip_the_base_did_not_choo
     obs, choice, legal = _decision_with_a_takeoff(env)
     sim = env.unwrapped.sim
     takeoff = sim.actions.takeoff
-    guard = GuardedController(nominal=True, override_takeoff=override_takeoff)
+    guard = GuardController(nominal=True, override_takeoff=override_takeoff)
     guard.reset(seed=0)
     guard.bind(sim)
     other = next(a for a in legal if a not in (choice, takeoff))
@@ -97,7 +97,7 @@ def test_without_override_takeoff_the_base_may_still_take_off():
     obs, _, legal = _decision_with_a_takeoff(env)
     sim = env.unwrapped.sim
     takeoff = sim.actions.takeoff
-    guard = GuardedController(base=FixedAction(takeoff), nominal=True, override_takeoff=False)
+    guard = GuardController(proposer=FixedAction(takeoff), nominal=True, override_takeoff=False)
     guard.reset(seed=0)
     guard.bind(sim)
     asked = _crafted(guard, {a: (1.0, 0.0, 20.0) for a in legal})
@@ -131,7 +131,7 @@ class _Hops(DispatcherController):
         return super().act(observation)
 
 
-@pytest.mark.parametrize("fleet", [None, "heuristic"])
+@pytest.mark.parametrize("fleet", [None, "dispatcher"])
 def test_without_port_hops_a_taxi_between_normal_ports_is_handed_over(fleet):
     """A base that hops: with ``port_hops`` its hop stands where the check is clean; without,
     ``fleet`` decides (``stay`` without a fleet), and the choice is never a hop."""
@@ -143,7 +143,7 @@ def test_without_port_hops_a_taxi_between_normal_ports_is_handed_over(fleet):
     assert dispatcher_choice not in base.hop_actions and obs["action_mask"][sim.actions.stay]
     wanted = dispatcher_choice if fleet else sim.actions.stay
     for port_hops in (True, False):
-        guard = GuardedController(base=base, nominal=True, fleet=fleet, port_hops=port_hops)
+        guard = GuardController(proposer=base, nominal=True, rollout_policy=fleet, port_hops=port_hops)
         guard.reset(seed=0)
         guard.bind(sim)
         _crafted(guard, {a: (0.0, 0.0, 50.0) for a in range(sim.actions.n)})
@@ -162,7 +162,7 @@ def test_without_port_hops_no_override_taxis_between_normal_ports():
     legal = np.flatnonzero(obs["action_mask"]).tolist()
     other = next(a for a in legal if a not in (choice, hop))
     for port_hops, picked in ((True, hop), (False, other)):
-        guard = GuardedController(nominal=True, port_hops=port_hops)
+        guard = GuardController(nominal=True, port_hops=port_hops)
         guard.reset(seed=0)
         guard.bind(sim)
         asked = _crafted(guard, {choice: (1.0, 50.0, 20.0), hop: (0.0, 90.0, 50.0),
@@ -188,7 +188,7 @@ def test_reward_margin_takes_the_fleets_choice_where_its_rollouts_earn_more(
     obs, choice, _ = _decision_with_a_takeoff(env)
     sim = env.unwrapped.sim
     takeoff = sim.actions.takeoff
-    guard = GuardedController(base=FixedAction(takeoff), fleet="heuristic", nominal=True,
+    guard = GuardController(proposer=FixedAction(takeoff), rollout_policy="dispatcher", nominal=True,
                               reward_margin=reward_margin)
     guard.reset(seed=0)
     guard.bind(sim)
@@ -202,12 +202,12 @@ def test_reward_margin_takes_the_fleets_choice_where_its_rollouts_earn_more(
 
 
 def test_reward_margin_rolls_out_nothing_more_where_the_two_agree_and_needs_a_fleet():
-    with pytest.raises(ValueError, match="reward_margin .* needs a fleet"):
-        GuardedController(reward_margin=0.0)
-    assert make_controller("handback[reward_margin=5]").reward_margin == 5.0
+    with pytest.raises(ValueError, match="reward_margin .* needs a rollout_policy"):
+        GuardController(reward_margin=0.0)
+    assert make_controller("lookahead[reward_margin=5]").settings.reward_margin == 5.0
     env = vertiport_v1.env(config="paper")
     obs, choice, _ = _decision_with_a_takeoff(env)
-    guard = GuardedController(fleet="heuristic", nominal=True, reward_margin=0.0)
+    guard = GuardController(rollout_policy="dispatcher", nominal=True, reward_margin=0.0)
     guard.reset(seed=0)
     guard.bind(env.unwrapped.sim)
     asked = _crafted(guard, {choice: (0.0, 50.0, 30.0)})

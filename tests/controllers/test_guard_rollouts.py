@@ -6,7 +6,7 @@ import pytest
 
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.episode import run_episode
-from agents.controllers.guard import GuardedController
+from agents.controllers.guard import GuardController
 from agents.controllers.registry import make_controller
 from marl_vertiport import vertiport_v1
 
@@ -17,7 +17,7 @@ def test_clairvoyant_rollouts_are_the_days_actual_future():
     env = vertiport_v1.env(config="paper_uncertain_10")
     env.reset(seed=800001)
     sim = env.unwrapped.sim
-    guard = GuardedController(clairvoyant=True, horizon_min=60)
+    guard = GuardController(clairvoyant=True, horizon_min=60)
     guard.reset(seed=800001)
     guard.bind(sim)
     assert guard._runs == 1
@@ -44,8 +44,8 @@ def test_clairvoyant_guard_changes_only_the_base_days_that_lose_a_vehicle():
     it changes nothing, and the day is the base's, metric for metric; where it does, it finds
     the decision to change."""
     env = vertiport_v1.env(config="paper_uncertain_10", **{"schedule.episode_steps": 300})
-    base = run_episode(env, make_controller("heuristic"), seed=800001)
-    guard = GuardedController(clairvoyant=True)
+    base = run_episode(env, make_controller("dispatcher"), seed=800001)
+    guard = GuardController(clairvoyant=True)
     seen = run_episode(env, guard, seed=800001)
     env.close()
     assert base["stranded"] == 0 and base["failed_takeoffs"] > 0  # a day with failures
@@ -55,8 +55,8 @@ def test_clairvoyant_guard_changes_only_the_base_days_that_lose_a_vehicle():
     # Validation day 800029 at 10 %, its first 8 hours: the base loses two vehicles, and one
     # decision changed with the day's future in view keeps them.
     env = vertiport_v1.env(config="paper_uncertain_10", **{"schedule.episode_steps": 480})
-    base = run_episode(env, make_controller("heuristic"), seed=800029)
-    guard = GuardedController(clairvoyant=True)
+    base = run_episode(env, make_controller("dispatcher"), seed=800029)
+    guard = GuardController(clairvoyant=True)
     seen = run_episode(env, guard, seed=800029)
     env.close()
     assert base["stranded"] >= 2 and seen["stranded"] == 0 and guard.changes == 1
@@ -69,12 +69,12 @@ def test_compare_samples_draws_more_rollouts_only_where_every_action_is_compared
     first ``samples`` rollouts draw what the check drew, so its values over those are the
     check's."""
     with pytest.raises(ValueError, match="compare_samples"):
-        GuardedController(samples=4, compare_samples=3)
-    assert GuardedController(samples=3).compare_samples == 3
-    assert make_controller("handback[compare_samples=16]").compare_samples == 16
+        GuardController(samples=4, compare_samples=3)
+    assert GuardController(samples=3).compare_samples == 3
+    assert make_controller("lookahead[compare_samples=16]").compare_samples == 16
     for config, runs in (("paper", (1, 1)), ("paper_uncertain", (4, 6))):
         env = vertiport_v1.env(config=config)
-        guard = GuardedController(samples=4, compare_samples=6)
+        guard = GuardController(samples=4, compare_samples=6)
         guard.bind(env.unwrapped.sim)
         assert (guard._runs, guard._compare_runs) == runs
         guard.close()
@@ -82,7 +82,7 @@ def test_compare_samples_draws_more_rollouts_only_where_every_action_is_compared
     env = vertiport_v1.env(config="paper_uncertain_10")
     env.reset(seed=0)
     sim = env.unwrapped.sim
-    guard = GuardedController(samples=2, compare_samples=5)
+    guard = GuardController(samples=2, compare_samples=5)
     guard.reset(seed=0)
     guard.bind(sim)
     action = int(np.flatnonzero(env.observe(env.agent_selection)["action_mask"])[0])

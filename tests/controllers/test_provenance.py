@@ -19,7 +19,7 @@ def test_checkpoint_files_of_agent_specs(tmp_path):
     assert checkpoint_files("gcn") == [SHIPPED_CHECKPOINT]
     assert checkpoint_files("gcn[deterministic=false]") == [SHIPPED_CHECKPOINT]
     assert checkpoint_files("runs/a/model_9.pt+gcn") == [Path("runs/a/model_9.pt"), SHIPPED_CHECKPOINT]
-    assert checkpoint_files("heuristic") == []
+    assert checkpoint_files("dispatcher") == []
     assert checkpoint_files("examples.custom_agent:ChargeFirst") == []
 
 

@@ -78,7 +78,7 @@ class TestLocalRayInstance:
         from marl_vertiport.config import load_config, to_dict
 
         env_cfg = to_dict(load_config("paper"))
-        tasks = [DayTask(env_cfg, s, steps, "heuristic", 4, noise=0.2)
+        tasks = [DayTask(env_cfg, s, steps, "dispatcher", 4, noise=0.2)
                  for s, steps in ((11, 60), (12, 20), (13, 40))]
         one, m1 = collect(tasks, 1, lambda *_: None, "here")
         two, m2 = collect(tasks, backend, lambda *_: None, "ray")
@@ -144,7 +144,7 @@ def test_two_node_cluster_sweep_survives_losing_a_node():
     mid-run; its tasks are retried on the other and every episode matches the local backend."""
     from ray.cluster_utils import Cluster
 
-    spec = parse_sweep({"agents": ["fcfs", "heuristic"], "configs": ["paper"],
+    spec = parse_sweep({"agents": ["fcfs", "dispatcher"], "configs": ["paper"],
                         "grid": {"uncertainty.wind_gust_prob": [0.0, 0.2]},
                         "set": {"schedule.episode_steps": 360}, "episodes": 3},
                        "node_loss", "test")

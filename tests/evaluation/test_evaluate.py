@@ -389,42 +389,42 @@ def test_agent_help_names_every_builtin_and_the_other_forms(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for name in [*BUILTIN, "gcn"]:
         assert name in text
-    assert ".pt" in text and "package.module:Class" in text and "heuristic[holding=false]" in text
+    assert ".pt" in text and "package.module:Class" in text and "dispatcher[holding=false]" in text
 
 
 def test_agent_spec_carries_constructor_arguments():
     from agents.controllers.registry import AgentSpecError, make_controller, split_spec
 
-    assert split_spec("heuristic") == ("heuristic", {})
-    assert split_spec("heuristic[holding=false, priority_margin_pct=2.5]") == (
-        "heuristic", {"holding": False, "priority_margin_pct": 2.5})
+    assert split_spec("dispatcher") == ("dispatcher", {})
+    assert split_spec("dispatcher[holding=false, priority_margin_pct=2.5]") == (
+        "dispatcher", {"holding": False, "priority_margin_pct": 2.5})
     assert split_spec("examples.custom_agent:ChargeFirst[]") == ("examples.custom_agent:ChargeFirst", {})
-    controller = make_controller("heuristic[holding=false,priority_margin_pct=2.5]")
+    controller = make_controller("dispatcher[holding=false,priority_margin_pct=2.5]")
     assert controller.holding is False and controller.priority_margin_pct == 2.5
-    assert make_controller("heuristic").holding is True
-    # A value may be a spec with arguments of its own: the guard builds its fleet from it.
-    nested = "guard[fleet=heuristic[arrival_priority_pct=40,holding=true],samples=2]"
+    assert make_controller("dispatcher").holding is True
+    # A value may be a spec with arguments of its own: the guard builds its rollout policy from it.
+    nested = "guard[rollout_policy=dispatcher[arrival_priority_pct=40,holding=true],samples=2]"
     assert split_spec(nested) == ("guard", {
-        "fleet": "heuristic[arrival_priority_pct=40,holding=true]", "samples": 2})
+        "rollout_policy": "dispatcher[arrival_priority_pct=40,holding=true]", "samples": 2})
     guard = make_controller(nested)
-    assert guard.fleet.arrival_priority_pct == 40 and guard.samples == 2
+    assert guard.own_rollout_policy.arrival_priority_pct == 40 and guard.settings.samples == 2
     guard.close()
-    for bad, words in [("heuristic[holding]", "not key=value"),
-                       ("heuristic[holding=false", "arguments look like"),
-                       ("heuristic[no_such_arg=1]", "no_such_arg"),
-                       ("heuristic[x=[1,]", "arguments look like"),
-                       ("guard[fleet=heuristic[holding=false]", "arguments look like"),
-                       ("heuristic[holding=false][x=1]", "arguments look like"),
-                       ("guard[fleet=heuristic[no_such_arg=1]]", "no_such_arg")]:
+    for bad, words in [("dispatcher[holding]", "not key=value"),
+                       ("dispatcher[holding=false", "arguments look like"),
+                       ("dispatcher[no_such_arg=1]", "no_such_arg"),
+                       ("dispatcher[x=[1,]", "arguments look like"),
+                       ("guard[rollout_policy=dispatcher[holding=false]", "arguments look like"),
+                       ("dispatcher[holding=false][x=1]", "arguments look like"),
+                       ("guard[rollout_policy=dispatcher[no_such_arg=1]]", "no_such_arg")]:
         with pytest.raises(AgentSpecError, match=re.escape(words)):
             make_controller(bad)
 
 
 def test_agent_arguments_reach_the_worker_processes(tmp_path):
     """The spec string is all a worker gets: two settings of one controller, side by side."""
-    assert _run(tmp_path, agents=("heuristic", "heuristic[holding=false]"), workers=2) == 0
+    assert _run(tmp_path, agents=("dispatcher", "dispatcher[holding=false]"), workers=2) == 0
     agents = {r["agent"] for r in _rows(tmp_path / "episodes.csv")}
-    assert agents == {"heuristic", "heuristic[holding=false]"}
+    assert agents == {"dispatcher", "dispatcher[holding=false]"}
 
 
 def test_a_crashing_controller_is_reported_with_its_file_and_line(tmp_path, capsys):

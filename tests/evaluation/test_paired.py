@@ -82,18 +82,18 @@ def test_bad_files_are_named(tmp_path, capsys):
 def test_unforced_losses_count_what_no_reference_agent_also_lost(tmp_path):
     rows = []
     for k, seed in enumerate(range(800000, 800004)):
-        rows.append(["heuristic", "paper", k, seed, 1000.0, 0, 1, 0])  # loses 1 every day
-        rows.append(["rollout", "paper", k, seed, 1100.0, 0, k % 2, 0])  # 0 on even days
+        rows.append(["dispatcher", "paper", k, seed, 1000.0, 0, 1, 0])  # loses 1 every day
+        rows.append(["planner", "paper", k, seed, 1100.0, 0, k % 2, 0])  # 0 on even days
         rows.append(["x", "paper", k, seed, 900.0, 1, 1, 0])  # loses 2 every day
     data = read_episodes([write(tmp_path / "ref.csv", rows)])
-    row, = compare(data, [("heuristic", "x")], reference=("heuristic", "rollout"))
+    row, = compare(data, [("dispatcher", "x")], reference=("dispatcher", "planner"))
     # The fewest lost by a reference agent: 0, 1, 0, 1; x loses 2: 2, 1, 2, 1.
     assert row["reference_days"] == 4
     assert row["unforced_base"] == pytest.approx(0.5) and row["unforced_candidate"] == 1.5
-    row, = compare(data, [("heuristic", "x")])  # no reference set
+    row, = compare(data, [("dispatcher", "x")])  # no reference set
     assert row["reference_days"] == 0 and row["unforced_candidate"] is None
-    with pytest.raises(PairedInputError, match="reference agent 'planner' is in none"):
-        compare(data, [("heuristic", "x")], reference=("planner",))
+    with pytest.raises(PairedInputError, match="reference agent 'guard' is in none"):
+        compare(data, [("dispatcher", "x")], reference=("guard",))
 
 
 def test_cli_takes_the_reference_agents_the_files_hold(tmp_path, capsys):

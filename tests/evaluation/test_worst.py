@@ -38,7 +38,7 @@ def test_event_window_and_lowest_reward_window():
 
 def test_an_evaluation_lists_its_worst_days_and_the_replay_renders_them(tmp_path, capsys):
     out = tmp_path / "run"
-    assert evaluate(["--agents", "random", "heuristic", "--configs", "paper", "--episodes", "2",
+    assert evaluate(["--agents", "random", "dispatcher", "--configs", "paper", "--episodes", "2",
                      "--workers", "1", "--no-progress", "--set", "schedule.episode_steps=150",
                      "--out", str(out), "--report", str(out / "report.md")]) == 0
     report = (out / "report.md").read_text()
@@ -46,7 +46,7 @@ def test_an_evaluation_lists_its_worst_days_and_the_replay_renders_them(tmp_path
     doc = json.loads((out / "results.json").read_text())
     assert doc["settings"]["rules"] == 1
     picks = worst_days(doc["episodes"])
-    assert [p.agent for p in picks] == ["random", "heuristic"]
+    assert [p.agent for p in picks] == ["random", "dispatcher"]
     assert worst_day.main([str(out), "--size", "320x240", "--window-min", "20",
                            "--before-min", "15", "--after-min", "5", "--no-progress"]) == 0
     folder = out / "worst_day"

@@ -68,7 +68,7 @@ def test_two_decisions_a_minute_halve_the_turn_gap_and_keep_every_rate_per_minut
 
 def lost_per_day(name, seeds):
     env = vertiport_v1.env(config=name)
-    lost = [run_aec_episode(env, make_controller("heuristic"), seed=s)["stranded"] for s in seeds]
+    lost = [run_aec_episode(env, make_controller("dispatcher"), seed=s)["stranded"] for s in seeds]
     env.close()
     return float(np.mean(lost))
 

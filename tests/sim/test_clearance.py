@@ -392,7 +392,7 @@ def test_simulators_of_one_layout_with_other_fleets_share_the_memos_safely():
         env = vertiport_v1.env(config="paper", fleet_size=fleet,
                                **{"schedule.episode_steps": 400})
         try:
-            return run_aec_episode(env, make_controller("heuristic"), seed=3)
+            return run_aec_episode(env, make_controller("dispatcher"), seed=3)
         finally:
             env.close()
 

@@ -40,7 +40,7 @@ def _day(common: bool, agent: str) -> dict:
 
 
 def test_two_controllers_meet_the_same_luck_only_with_common_random_numbers():
-    a, b = _day(True, "heuristic"), _day(True, "fcfs")
+    a, b = _day(True, "dispatcher"), _day(True, "fcfs")
     assert a["chargers"] == b["chargers"]  # step t's charger failures, whoever flies
     compared = 0
     for x, y in zip(a["attempts"], b["attempts"]):
@@ -49,7 +49,7 @@ def test_two_controllers_meet_the_same_luck_only_with_common_random_numbers():
         compared += k
     assert compared >= 10 and any(any(x) for x in a["attempts"])
     # One generator for everything: the two days' luck parts once their decisions do.
-    c, d = _day(False, "heuristic"), _day(False, "fcfs")
+    c, d = _day(False, "dispatcher"), _day(False, "fcfs")
     assert c["chargers"] != d["chargers"]
 
 
@@ -107,7 +107,7 @@ def test_the_guard_is_not_clairvoyant_with_common_random_numbers(common):
     sim, scratch = VertiportSim(cfg), VertiportSim(cfg)
     sim.reset(np.random.default_rng(4))
     builder, scratch_builder = ObservationBuilder(sim), ObservationBuilder(scratch)
-    fleet = make_controller("heuristic")
+    fleet = make_controller("dispatcher")
     snap = sim.snapshot()
     seen = []
 

@@ -192,7 +192,7 @@ def test_a_day_of_the_dispatcher_on_the_realistic_profile_is_legal_and_counts_re
         last[:] = [info.get("episode") for info in env.infos.values()]
 
     try:
-        metrics = run_aec_episode(env, make_controller("heuristic"), seed=800000,
+        metrics = run_aec_episode(env, make_controller("dispatcher"), seed=800000,
                                   on_step=check)
     finally:
         env.close()

@@ -166,7 +166,7 @@ def test_a_day_is_the_same_on_the_avx2_and_the_avx512_blas_kernels():
         pytest.skip("needs a CPU that runs both OpenBLAS kernels (AVX-512)")
     code = ("from agents.evaluate.episodes import run_task\n"
             "from agents.evaluate.settings import EpisodeTask\n"
-            "m = run_task(EpisodeTask('heuristic', 'paper_uncertain_10', 0, 1000100, ())).metrics\n"
+            "m = run_task(EpisodeTask('dispatcher', 'paper_uncertain_10', 0, 1000100, ())).metrics\n"
             "print(repr(m['total_reward']), repr(m['mean_battery_pct']), m['steps'])")
     out = {}
     for kernel in ("Haswell", "SkylakeX"):

@@ -22,7 +22,7 @@ def test_bench_smoke(tmp_path):
         assert row["engine_alone_us_per_step"] > 0 and row["overhead_ratio_engine_alone"] > 0
         assert row["moving_overhead_ratio"] > 0 and 0 < row["moving_fraction"] <= 1
     assert {(r["workload"], r["config"]) for r in data["traffic"]} == {
-        ("heuristic", "paper"), ("fcfs", "paper"), ("heuristic", "large"), ("fcfs", "large")}
+        ("dispatcher", "paper"), ("fcfs", "paper"), ("dispatcher", "large"), ("fcfs", "large")}
     for row in data["traffic"]:
         assert row["steps"] > 0 and row["days"] == 1
         assert row["steps_per_s_min"] <= row["steps_per_s_median"] <= row["steps_per_s_max"]
@@ -39,7 +39,7 @@ def test_bench_smoke(tmp_path):
     assert planner["decisions"] == 5 and planner["decisions_per_s"] > 0
     assert 0 < planner["engine_share"] < 1 and planner["overhead_ratio"] > 0
     assert planner["overhead_ratio_engine_alone"] > 0 and 0 <= planner["simulated"] <= 5
-    assert data["profile"]["workload"] == "heuristic" and data["profile"]["steps"] == 1440
+    assert data["profile"]["workload"] == "dispatcher" and data["profile"]["steps"] == 1440
     assert data["profile"]["top"] and all(0 <= e["own_share"] <= 1 for e in data["profile"]["top"])
     assert [(r["copies"], r["processes"]) for r in data["vector"]] == [(2, 1), (2, 1), (2, 2)]
     assert [(r["batch"], r["path"]) for r in data["inference"]] == [
@@ -156,10 +156,10 @@ def test_replaying_a_controllers_recorded_actions_reproduces_its_days():
     from agents.controllers.registry import make_controller
     from marl_vertiport import vertiport_v1
 
-    traffic = record_traffic("heuristic", "paper_uncertain", days=2, seed=31)
+    traffic = record_traffic("dispatcher", "paper_uncertain", days=2, seed=31)
     env = vertiport_v1.env(config="paper_uncertain")
     for d, actions in enumerate(traffic):
-        played = run_aec_episode(env, make_controller("heuristic"), seed=31 + d)
+        played = run_aec_episode(env, make_controller("dispatcher"), seed=31 + d)
 
         class Replay:
             def __init__(self):

@@ -10,7 +10,7 @@ from marl_vertiport.config import load_config
 @pytest.mark.parametrize("config,chargers", [("paper", 1), ("twin", 2)])
 def test_every_charger_minute_is_accounted_for_once(config, chargers):
     steps = 150
-    day = charger_day("heuristic", config, 3, 800_003, {"schedule.episode_steps": steps})
+    day = charger_day("dispatcher", config, 3, 800_003, {"schedule.episode_steps": steps})
     total = day.approach_min + day.charging_min + day.parked_full_min + day.free_min
     # twin decides twice a minute: 150 steps are 75 minutes
     assert total == pytest.approx(steps * chargers * load_config(config).schedule.minutes_per_step)

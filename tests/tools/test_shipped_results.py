@@ -36,7 +36,7 @@ def test_the_expected_result_sets_are_shipped():
 @pytest.mark.parametrize("result", SETS, ids=lambda s: s.name)
 def test_every_shipped_result_names_the_shipped_checkpoint_and_committed_code(result):
     assert check.record_problems(result, SHIPPED_CHECKPOINT) == []
-    # Every set plays the shipped policy: alone (gcn) or inside a look-ahead (handback).
+    # Every set plays the shipped policy: alone (gcn) or inside a look-ahead (lookahead).
     assert any(SHIPPED_CHECKPOINT in checkpoint_files(agent) for agent in result.agents)
 
 
@@ -98,7 +98,7 @@ def test_a_replay_finds_a_cell_that_the_code_no_longer_gives(tmp_path):
     from agents.execution import LocalBackend
 
     out = tmp_path / "set"
-    assert main(["--agents", "fcfs", "heuristic", "--configs", "paper", "--episodes", "3",
+    assert main(["--agents", "fcfs", "dispatcher", "--configs", "paper", "--episodes", "3",
                  "--set", "schedule.episode_steps=40", "--workers", "1", "--no-progress",
                  "--out", str(out)]) == 0
     result = check.read_set(out / "results.json")

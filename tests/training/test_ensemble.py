@@ -11,7 +11,7 @@ from agents.training.pipeline import train
 from marl_vertiport.config import ConfigError, build_dataclass, to_dict
 
 PRETRAIN = {"days": 1, "day_steps": 40, "starts": 1, "start_steps": 12, "low_battery_starts": 0,
-            "teacher": "heuristic", "workers": 1, "epochs": 2, "batch_size": 32,
+            "teacher": "dispatcher", "workers": 1, "epochs": 2, "batch_size": 32,
             "learning_rate": 1e-3}
 
 

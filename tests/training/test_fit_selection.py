@@ -18,7 +18,7 @@ def _config(**pretrain) -> TrainConfig:
     return build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
                                          "model": {"hidden": 16, "hidden_dims": [32]},
                                          "pretrain": {"starts": 0, "low_battery_starts": 0,
-                                                      "epochs": 1, "teacher": "heuristic",
+                                                      "epochs": 1, "teacher": "dispatcher",
                                                       "workers": 1, "batch_size": 64,
                                                       "keep": "paired", **pretrain}})
 

@@ -18,7 +18,7 @@ from helpers import small_actor
 
 def test_demonstration_day_keeps_choices_with_legal_labels():
     env_cfg = to_dict(load_config("paper"))
-    data, metrics = label_day(DayTask(env_cfg, seed=7, steps=60, teacher="rollout", rollout_horizon=4))
+    data, metrics = label_day(DayTask(env_cfg, seed=7, steps=60, teacher="planner", planner_horizon=4))
     n = len(data["label"])
     assert 0 < n < 60 and metrics["steps"] == 60
     assert data["evtol_nodes"].shape == (n, 4, 13) and data["port_nodes"].shape == (n, 10, 4)
@@ -33,7 +33,7 @@ def test_demonstration_day_keeps_choices_with_legal_labels():
 def test_fit_then_learner_drives_a_dagger_day():
     torch.manual_seed(0)
     env_cfg = to_dict(load_config("paper"))
-    data, _ = collect([DayTask(env_cfg, s, 80, "heuristic", 4) for s in (1, 2)], 1,
+    data, _ = collect([DayTask(env_cfg, s, 80, "dispatcher", 4) for s in (1, 2)], 1,
                       lambda *_: None, "demo")
     actor = small_actor()
     first = fit_actor(actor, data, 1, 64, 1e-3, 0, lambda *_: None, "bc", regret_cap=50.0)
@@ -42,43 +42,43 @@ def test_fit_then_learner_drives_a_dagger_day():
     cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()),
                                         "model": {"hidden": 16, "hidden_dims": [32]}})
     learner = _learner(actor, env_cfg, cfg)
-    dagger, metrics = label_day(DayTask(env_cfg, 3, 40, "heuristic", 4, learner=learner))
+    dagger, metrics = label_day(DayTask(env_cfg, 3, 40, "dispatcher", 4, learner=learner))
     assert metrics["steps"] == 40 and len(dagger["label"]) > 0
     # A scoring day: the same learner drives the same day, no teacher runs, nothing is returned.
-    scored, same = label_day(DayTask(env_cfg, 3, 40, "rollout", 4, learner=learner, labelled=False))
+    scored, same = label_day(DayTask(env_cfg, 3, 40, "planner", 4, learner=learner, labelled=False))
     assert same == metrics and all(len(v) == 0 for v in scored.values())
     assert scored["evtol_nodes"].shape == (0, 4, 13) and scored["action_mask"].dtype == np.int8
     with pytest.raises(ValueError, match="learner"):
-        label_day(DayTask(env_cfg, 3, 40, "heuristic", 4, labelled=False))
+        label_day(DayTask(env_cfg, 3, 40, "dispatcher", 4, labelled=False))
     with pytest.raises(ValueError, match="teacher"):
         make_teacher("oracle", 4, 0.0, 0)
     # The guarded planner: the planner decides, the dispatcher flies the guard's rollouts.
     from agents.controllers.dispatcher import DispatcherController
-    from agents.controllers.guard import GuardedController
-    from agents.controllers.planner import RolloutPlanner
+    from agents.controllers.guard import GuardController
+    from agents.controllers.planner import PlannerController
 
-    guarded = make_teacher("guarded_rollout", 4, 3.0, 7)
-    assert isinstance(guarded, GuardedController) and isinstance(guarded.base, RolloutPlanner)
-    assert isinstance(guarded.fleet, DispatcherController)
-    assert (guarded.base.horizon, guarded.base.margin, guarded.seed) == (4, 3.0, 7)
-    day, _ = label_day(DayTask(env_cfg, 3, 40, "guarded_rollout", 4))
-    planned, _ = label_day(DayTask(env_cfg, 3, 40, "rollout", 4))
+    guarded = make_teacher("guarded_planner", 4, 3.0, 7)
+    assert isinstance(guarded, GuardController) and isinstance(guarded.proposer, PlannerController)
+    assert isinstance(guarded.own_rollout_policy, DispatcherController)
+    assert (guarded.proposer.horizon, guarded.proposer.margin, guarded.settings.seed) == (4, 3.0, 7)
+    day, _ = label_day(DayTask(env_cfg, 3, 40, "guarded_planner", 4))
+    planned, _ = label_day(DayTask(env_cfg, 3, 40, "planner", 4))
     # Within 40 steps of a full fleet no choice loses a vehicle: the planner's labels stand.
     np.testing.assert_array_equal(day["label"], planned["label"])
     # The planner's options reach the planner, behind the guard too; others are refused.
-    robust = make_teacher("guarded_rollout", 4, 3.0, 7, expect_failures=True, rescue=True)
-    assert robust.base.expect_failures and robust.base.rescue
-    plain = make_teacher("rollout", 4, 3.0, 7)
+    robust = make_teacher("guarded_planner", 4, 3.0, 7, expect_failures=True, rescue=True)
+    assert robust.proposer.expect_failures and robust.proposer.rescue
+    plain = make_teacher("planner", 4, 3.0, 7)
     assert not plain.expect_failures and not plain.rescue
     with pytest.raises(ValueError, match="planner options"):
-        make_teacher("rollout", 4, 3.0, 7, nominal=False)
+        make_teacher("planner", 4, 3.0, 7, nominal=False)
 
 
 def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatch):
     import agents.training.imitation as imitation
 
     env_cfg = to_dict(load_config("paper"))
-    clean, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4))
+    clean, _ = label_day(DayTask(env_cfg, 5, 60, "dispatcher", 4))
     chosen: list[int] = []
     original = imitation.make_teacher
 
@@ -89,9 +89,9 @@ def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatc
         return teacher
 
     monkeypatch.setattr(imitation, "make_teacher", recording_teacher)
-    noisy, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4, noise=0.5))
+    noisy, _ = label_day(DayTask(env_cfg, 5, 60, "dispatcher", 4, noise=0.5))
     monkeypatch.setattr(imitation, "make_teacher", original)
-    again, _ = label_day(DayTask(env_cfg, 5, 60, "heuristic", 4, noise=0.5))
+    again, _ = label_day(DayTask(env_cfg, 5, 60, "dispatcher", 4, noise=0.5))
     # Random actions take the day elsewhere; the same seed draws the same ones.
     assert not np.array_equal(clean["evtol_nodes"][:20], noisy["evtol_nodes"][:20])
     np.testing.assert_array_equal(noisy["label"], again["label"])
@@ -112,7 +112,7 @@ def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatc
 
 def test_collect_gives_the_same_data_on_one_or_two_workers():
     env_cfg = to_dict(load_config("paper"))
-    tasks = [DayTask(env_cfg, s, steps, "heuristic", 4, noise=0.2)
+    tasks = [DayTask(env_cfg, s, steps, "dispatcher", 4, noise=0.2)
              for s, steps in ((11, 90), (12, 20), (13, 50))]
     one, m1 = collect(tasks, 1, lambda *_: None, "one")
     two, m2 = collect(tasks, 2, lambda *_: None, "two")
@@ -132,7 +132,7 @@ def test_round_tasks_mix_seeds_noise_and_low_batteries():
     assert [t.steps for t in first] == [1440] * 2 + [120] * 8
     assert all(t.planner_options == {} for t in first)
     robust = TrainConfig(pretrain=build_dataclass(type(TrainConfig().pretrain), {
-        "days": 1, "rollout_expect_failures": True, "rollout_rescue": True}))
+        "days": 1, "planner_expect_failures": True, "planner_rescue": True}))
     assert {frozenset(t.planner_options) for t in round_tasks(robust, env_cfg, 0, None, False)} == {
         frozenset({"expect_failures", "rescue"})}
     assert [t.noise for t in first] == [0.0] * 2 + [0.1] * 8  # full days score the fits: no noise
@@ -150,7 +150,7 @@ def test_days_of_different_vertiports_are_padded_to_one_size():
     and rows are marked."""
     configs = [to_dict(load_config("paper", fleet_size=3)), to_dict(load_config("twin"))]
     cfg = build_dataclass(TrainConfig, {**to_dict(TrainConfig()), "pretrain": {
-        "days": 2, "day_steps": 30, "starts": 0, "low_battery_starts": 0, "teacher": "heuristic"}})
+        "days": 2, "day_steps": 30, "starts": 0, "low_battery_starts": 0, "teacher": "dispatcher"}})
     tasks = round_tasks(cfg, configs, 0, None, last=False)
     assert [t.env_config["fleet_size"] for t in tasks] == [3, 6]
     data, _ = collect(tasks, 1, lambda *_: None, "demo", sizes=(13, 6))

@@ -28,9 +28,9 @@ from helpers import tiny_config
 
 @pytest.mark.parametrize("mode", ["multi_agent", "single_agent"])
 def test_two_iteration_training_save_reload_and_resume(tmp_path, mode):
-    teacher = "rollout" if mode == "multi_agent" else "heuristic"
+    teacher = "planner" if mode == "multi_agent" else "dispatcher"
     cfg = tiny_config(mode, pretrain={"days": 2, "day_steps": 24, "teacher": teacher,
-                                      "rollout_horizon": 4, "workers": 1, "epochs": 1,
+                                      "planner_horizon": 4, "workers": 1, "epochs": 1,
                                       "batch_size": 64, "learning_rate": 1e-3, "dagger_rounds": 1,
                                       "dagger_epochs": 2},
                       critic_warmup_iterations=1)
@@ -117,7 +117,7 @@ def test_run_killed_during_the_warm_start_resumes_it(tmp_path, monkeypatch):
 
     cfg = tiny_config("single_agent", iterations=1,
                       pretrain={"days": 1, "day_steps": 24, "starts": 1, "start_steps": 12,
-                                "low_battery_starts": 1, "noise": 0.2, "teacher": "heuristic",
+                                "low_battery_starts": 1, "noise": 0.2, "teacher": "dispatcher",
                                 "workers": 1, "epochs": 1, "batch_size": 64,
                                 "learning_rate": 1e-3, "dagger_rounds": 1})
     train(cfg, tmp_path / "whole", log=lambda *_: None, evaluate=False)

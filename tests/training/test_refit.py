@@ -18,7 +18,7 @@ def run(tmp_path_factory):
     base.update(mode="multi_agent", num_envs=2, num_steps_per_env=8, iterations=1,
                 save_interval=1, critic_warmup_iterations=0,
                 pretrain={"days": 1, "day_steps": 40, "starts": 1, "start_steps": 12,
-                          "low_battery_starts": 0, "teacher": "heuristic", "workers": 1,
+                          "low_battery_starts": 0, "teacher": "dispatcher", "workers": 1,
                           "epochs": 2, "batch_size": 32, "learning_rate": 1e-3},
                 evaluation={"episodes": 0, "agents": []})
     train(build_dataclass(TrainConfig, base), folder, log=lambda *_: None, evaluate=False)

@@ -25,7 +25,7 @@ TINY = {
     "num_envs": 2, "num_steps_per_env": 8, "iterations": 3, "save_interval": 1,
     "critic_warmup_iterations": 1,
     "pretrain": {"days": 2, "day_steps": 30, "starts": 2, "start_steps": 10,
-                 "low_battery_starts": 1, "rollout_horizon": 4, "epochs": 2, "batch_size": 64},
+                 "low_battery_starts": 1, "planner_horizon": 4, "epochs": 2, "batch_size": 64},
     "ensemble": {"fits": 1, "days": 2, "epochs": 1},
     "evaluation": {"episodes": 0},
 }

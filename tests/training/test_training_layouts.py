@@ -191,7 +191,7 @@ def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm
         load_train_config(path)
     default = to_dict(load_train_config("default"))
     assert default["rules"] == 1 and default["ensemble"]["fits"] == 0
-    assert default["pretrain"]["dagger_rounds"] == 1 and default["pretrain"]["teacher"] == "rollout"
+    assert default["pretrain"]["dagger_rounds"] == 1 and default["pretrain"]["teacher"] == "planner"
     old = to_dict(load_train_config("ensemble_v0"))
     single = to_dict(load_train_config("single_fit"))
     stage = to_dict(load_train_config("ppo_stage/sharpened"))

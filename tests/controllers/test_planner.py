@@ -9,7 +9,7 @@ import pytest
 from agents.controllers.episode import run_gym_episode
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.registry import make_controller
-from agents.controllers.planner import RolloutPlanner
+from agents.controllers.planner import PlannerController
 from helpers import seed0_sim
 from marl_vertiport import vertiport_v1
 from marl_vertiport.gym_env import VertiportEnv
@@ -20,7 +20,7 @@ from marl_vertiport.spaces import ObservationBuilder
 def test_planning_leaves_the_env_untouched_and_acts_legally():
     env = VertiportEnv("paper")
     obs, _ = env.reset(seed=4)
-    planner = RolloutPlanner(horizon=6)
+    planner = PlannerController(horizon=6)
     planner.bind(env.sim)
     for _ in range(120):
         before = env.sim.snapshot()
@@ -37,7 +37,7 @@ def test_planning_leaves_the_env_untouched_and_acts_legally():
 
 def test_candidates_and_unbound_use():
     sim = seed0_sim()  # evtol_0 on the charger (100 %), evtol_3 hovering
-    planner = RolloutPlanner(horizon=3, min_takeoff_battery_pct=80.0)
+    planner = PlannerController(horizon=3, min_takeoff_battery_pct=80.0)
     planner.bind(sim)
     assert sim.acting == 0
     assert planner.candidates(sim) == [0, 1]  # stay, take off (both normal ports are taken)
@@ -50,10 +50,10 @@ def test_candidates_and_unbound_use():
     sim.battery[3] = 20.0  # at the reserve: staying aloft is ruled out
     assert planner.candidates(sim) == [2] and planner.last_forced
     with pytest.raises(RuntimeError, match="bind"):
-        RolloutPlanner().act({"action_mask": np.ones(14, np.int8)})
+        PlannerController().act({"action_mask": np.ones(14, np.int8)})
     with pytest.raises(ValueError, match="horizon"):
-        RolloutPlanner(horizon=0)
-    assert make_controller("rollout").name == "rollout"
+        PlannerController(horizon=0)
+    assert make_controller("planner").name == "planner"
     planner.close()
 
 
@@ -75,13 +75,13 @@ def test_planning_shortcuts_change_no_decision_or_value():
     """A decision with one candidate is not simulated, and rollout turns with one legal action
     skip a pure base controller: the actions and values are those of asking it every turn."""
     env = VertiportEnv("paper")
-    fast, slow = RolloutPlanner(horizon=8), RolloutPlanner(horizon=8, base=_AskedEveryTurn())
+    fast, slow = PlannerController(horizon=8), PlannerController(horizon=8, rollout_policy=_AskedEveryTurn())
     obs, _ = env.reset(seed=6)
     fast.bind(env.sim)
     slow.bind(env.sim)
     skipped = 0
     for _ in range(160):
-        calls = slow.base.calls
+        calls = slow.rollout_policy.calls
         action = fast.act(obs)
         assert slow.act(obs) == action
         if len(slow.last_q) > 1:
@@ -89,9 +89,9 @@ def test_planning_shortcuts_change_no_decision_or_value():
         else:
             skipped += 1
             assert fast.last_q == {}
-            assert slow.base.calls - calls == 1  # only its own choice: nothing was simulated
+            assert slow.rollout_policy.calls - calls == 1  # only its own choice: nothing was simulated
         obs, *_ = env.step(action)
-    assert skipped > 0 and slow.base.calls > 160
+    assert skipped > 0 and slow.rollout_policy.calls > 160
     env.close()
     fast.close()
     slow.close()
@@ -99,7 +99,7 @@ def test_planning_shortcuts_change_no_decision_or_value():
 
 def test_terminal_value_by_hand():
     sim = seed0_sim()
-    planner = RolloutPlanner(terminal_turns=10)
+    planner = PlannerController(terminal_turns=10)
     sim.battery[:] = [100.0, 50.0, 20.0, 0.0]
     sim.delay[:] = [0.0, 0.0, 3.0, 0.0]
     sim.status[3] = OUT_OF_SERVICE
@@ -108,7 +108,7 @@ def test_terminal_value_by_hand():
     assert planner.terminal_value(sim) == pytest.approx(10 * per_turn)
     sim.step_count = sim.cfg.schedule.episode_steps - 8  # 2 turns of each vehicle left
     assert planner.terminal_value(sim) == pytest.approx(2 * per_turn)
-    assert RolloutPlanner(terminal_turns=0).terminal_value(sim) == 0.0
+    assert PlannerController(terminal_turns=0).terminal_value(sim) == 0.0
 
 
 def test_planner_beats_the_dispatcher_it_rolls_out():
@@ -117,10 +117,10 @@ def test_planner_beats_the_dispatcher_it_rolls_out():
     # energy check on, its lead over the dispatcher on half a day is within the day-to-day noise.
     env = VertiportEnv("paper", **{"schedule.episode_steps": 480, "atc.energy_check": False})
     totals = {}
-    for name, ctl in (("heuristic", DispatcherController()), ("rollout", RolloutPlanner())):
+    for name, ctl in (("dispatcher", DispatcherController()), ("planner", PlannerController())):
         totals[name] = sum(run_gym_episode(env, ctl, seed)["total_reward"] for seed in (11, 12))
     env.close()
-    assert totals["rollout"] > totals["heuristic"] + 100.0
+    assert totals["planner"] > totals["dispatcher"] + 100.0
 
 
 def test_rollouts_run_on_the_nominal_model_unless_asked_otherwise():
@@ -128,7 +128,7 @@ def test_rollouts_run_on_the_nominal_model_unless_asked_otherwise():
     env.reset(seed=3)
     sim = env.unwrapped.sim
     assert sim.cfg.uncertainty.wind_gust_prob > 0  # the premise: the env has uncertainties
-    nominal, noisy = RolloutPlanner(horizon=2), RolloutPlanner(horizon=2, nominal=False)
+    nominal, noisy = PlannerController(horizon=2), PlannerController(horizon=2, nominal=False)
     nominal.bind(sim)
     noisy.bind(sim)
     un = nominal._scratch.cfg.uncertainty
@@ -163,7 +163,7 @@ def test_expect_failures_weighs_a_takeoff_by_its_failure():
     sim = env.unwrapped.sim
     p = sim.cfg.uncertainty.takeoff_failure_prob
     assert p > 0  # the premise: take-offs can fail in this config
-    plain, weighed = RolloutPlanner(horizon=8), RolloutPlanner(horizon=8, expect_failures=True)
+    plain, weighed = PlannerController(horizon=8), PlannerController(horizon=8, expect_failures=True)
     plain.bind(sim)
     weighed.bind(sim)
     dispatcher, compared = DispatcherController(), 0
@@ -182,7 +182,7 @@ def test_expect_failures_weighs_a_takeoff_by_its_failure():
         env.step(dispatcher.act(obs))
     assert compared >= 5
     with pytest.raises(ValueError, match="nominal"):
-        RolloutPlanner(nominal=False, expect_failures=True)
+        PlannerController(nominal=False, expect_failures=True)
     for planner in (plain, weighed):
         planner.close()
     env.close()
@@ -194,7 +194,7 @@ def test_rescue_simulates_the_filtered_actions_when_every_candidate_loses_a_vehi
     sim = seed0_sim(rules=1)
     sim.acting, sim.battery[1] = 1, 20.0
     obs = ObservationBuilder(sim).observe(1)
-    plain, rescuer = RolloutPlanner(), RolloutPlanner(rescue=True)
+    plain, rescuer = PlannerController(), PlannerController(rescue=True)
     plain.bind(sim)
     rescuer.bind(sim)
     assert plain.act(obs) == sim.actions.stay and plain.last_q == {}  # unsimulated
