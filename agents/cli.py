@@ -11,7 +11,8 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     render        an animated GIF or MP4 of one episode of a controller, with its decisions
     worst-day     each controller's worst day of an evaluation, rendered with its decision log
     bench         the speed and memory benchmark (docs/performance.md)
-    capacity      the charger study: where the charging ports' minutes go, vehicles lost
+    capacity      whether each vertiport carries its fleet, from its config alone
+    charger-study where the charging ports' minutes go on simulated days, vehicles lost
     soak          many days with every uncertainty high: invariants after every step, memory
     demo          random legal actions for a few episodes, with steps per second
     info          spaces, feature columns and action names of an env config
@@ -42,7 +43,8 @@ COMMANDS = {
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),
     "check-train": ("agents.checks.train", "a fresh training run against the shipped checkpoint"),
     "check-results": ("agents.checks.results", "shipped results: their record and their first days replayed"),
-    "capacity": ("agents.studies.capacity", "the charger study"),
+    "capacity": ("agents.studies.capacity", "whether a vertiport carries its fleet, from its config"),
+    "charger-study": ("agents.studies.charger_study", "where the charging ports' minutes go, simulated"),
     "soak": ("agents.studies.soak", "many days with high uncertainty: invariants and memory"),
     "demo": ("marl_vertiport.cli", "random legal actions for a few episodes"),
     "info": ("marl_vertiport.cli", "spaces, features and action names of a config"),

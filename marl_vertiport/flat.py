@@ -20,6 +20,16 @@ for it: ``action_masks()`` (sb3-contrib's ``MaskablePPO``) and ``info["action_ma
   ``gymnasium.make("marl_vertiport/VertiportFlat-v1")`` builds the two together.
 * :class:`FlatParallel`: a PettingZoo Parallel wrapper of ``vertiport_v1.parallel_env()``
   (SuperSuit's vector envs and observation wrappers on the multi-agent env).
+* :class:`FlatAEC`: a PettingZoo AEC wrapper of ``vertiport_v1.env()`` for libraries whose
+  default models read one array per key (RLlib's ``PettingZooEnv``): every observation becomes
+  ``{"action_mask": int8 (A,), "observations": float32 (D - A,)}`` (the layout above without
+  the mask's columns, which stay under their own key), and with ``with_state=True`` also
+  ``"state": float32 (S,)``, ``env.state()`` flattened, so that a library that sees only
+  observations can give the global state to a centralised critic. The actor must not read
+  ``"state"``: it is not what a deployed eVTOL observes.
+
+This is the project's one flattener; before 0.2.0 the AEC wrapper was
+``agents.interop.flat.FlatObservation``.
 """
 
 from __future__ import annotations
@@ -29,15 +39,16 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
-from pettingzoo.utils.wrappers import BaseParallelWrapper
+from pettingzoo import AECEnv
+from pettingzoo.utils.wrappers import BaseParallelWrapper, BaseWrapper
 
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import (
     EVTOL_FEATURES, PORT_FEATURES, SELF_FEATURES, STATUS_NAMES, EARLY, DELAYED,
 )
 
-__all__ = ["FlatObservation", "FlatParallel", "flat_bounds", "flat_columns", "flatten_observation",
-           "make_flat_env"]
+__all__ = ["FlatAEC", "FlatObservation", "FlatParallel", "flat_bounds", "flat_columns",
+           "flatten_arrays", "flatten_observation", "make_flat_env"]
 
 _GRAPH_KEYS = ("evtol_nodes", "port_nodes", "self")
 
@@ -87,13 +98,16 @@ def flat_bounds(sim: VertiportSim) -> tuple[np.ndarray, np.ndarray]:
     return bounds[:, 0].copy(), bounds[:, 1].copy()
 
 
+def flatten_arrays(arrays: dict[str, np.ndarray], keys: tuple[str, ...]) -> np.ndarray:
+    """The arrays of ``keys``, each raveled (row-major), end to end as one float32 vector."""
+    return np.concatenate([np.asarray(arrays[k], dtype=np.float32).ravel() for k in keys])
+
+
 def flatten_observation(obs: dict[str, Any]) -> np.ndarray:
     """A graph observation (``{"observation": {...}, "action_mask"}``) as the flat float32
     vector of the module's column layout (not clipped)."""
-    graph = obs["observation"]
-    parts = [np.asarray(graph[k], dtype=np.float32).ravel() for k in _GRAPH_KEYS]
-    parts.append(np.asarray(obs["action_mask"], dtype=np.float32))
-    return np.concatenate(parts)
+    return np.concatenate([flatten_arrays(obs["observation"], _GRAPH_KEYS),
+                           np.asarray(obs["action_mask"], dtype=np.float32)])
 
 
 class _Flattener:
@@ -198,3 +212,50 @@ class FlatParallel(BaseParallelWrapper):
 
     def state(self) -> dict:
         return self.env.state()
+
+
+class FlatAEC(BaseWrapper):
+    """The AEC env with observations ``{"action_mask", "observations"[, "state"]}`` (the module
+    docstring): the graph columns of the flat layout, clipped into their bounds, and the mask
+    apart.
+
+    Args:
+        env: the vertiport AEC env (``vertiport_v1.env(...)`` or ``raw_env(...)``).
+        with_state: also put the flattened ``env.state()`` in every observation.
+    """
+
+    def __init__(self, env: AECEnv, with_state: bool = False) -> None:
+        super().__init__(env)
+        self._flat = _Flattener(_vertiport_sim(env))
+        mask_space = env.observation_space(env.possible_agents[0])["action_mask"]
+        self._graph_columns = len(self._flat.columns) - int(mask_space.shape[0])
+        #: The names of the ``"observations"`` columns.
+        self.columns = self._flat.columns[:self._graph_columns]
+        self.with_state = with_state
+        flat = {"action_mask": mask_space,
+                "observations": spaces.Box(self._flat.low[:self._graph_columns],
+                                           self._flat.high[:self._graph_columns],
+                                           dtype=np.float32)}
+        if with_state:
+            state_space: spaces.Dict = env.unwrapped.state_space
+            self.state_keys = tuple(state_space.spaces)
+            size = sum(int(np.prod(s.shape)) for s in state_space.spaces.values())
+            flat["state"] = spaces.Box(-np.inf, np.inf, (size,), np.float32)
+        self._space = spaces.Dict(flat)
+        self.observation_spaces = dict.fromkeys(env.possible_agents, self._space)
+
+    @property
+    def clipped(self) -> int:
+        """Values clipped into the bounds so far (none expected; see the module docstring)."""
+        return self._flat.clipped
+
+    def observation_space(self, agent: str) -> spaces.Dict:
+        return self._space
+
+    def observe(self, agent: str) -> dict[str, Any]:
+        obs = self.env.observe(agent)
+        out = {"action_mask": obs["action_mask"],
+               "observations": self._flat(obs)[:self._graph_columns]}
+        if self.with_state:
+            out["state"] = flatten_arrays(self.env.state(), self.state_keys)
+        return out

@@ -9,7 +9,7 @@
 * :mod:`agents.interop.rllib_env`: the AEC env behind RLlib's ``PettingZooEnv``, with the
   observation flattened to ``{"action_mask", "observations"}`` (and ``"state"`` for a
   centralised critic), an action-masking RLModule and a PPO config. Extra: ``rllib``.
-* :mod:`agents.interop.flat`: the flattening itself, a PettingZoo wrapper with no RL library.
+* the flattening itself is :class:`marl_vertiport.flat.FlatAEC` (the env layer, no RL library).
 
 Every library has to respect the same three facts of the env: the legal actions travel as
 ``observation["action_mask"]`` (int8, 1 = legal), an illegal action raises ``ValueError``

@@ -7,7 +7,7 @@ What RLlib needs from the env, and what this module adds for it:
   observation of the next agent to act, with that agent's reward for its previous action
   (the env keeps it in ``_cumulative_rewards`` until the agent acts again).
 * RLlib's default PPO models read neither a nested ``Dict`` observation nor an action mask, so
-  the env goes through :class:`agents.interop.flat.FlatObservation` (``{"action_mask",
+  the env goes through :class:`marl_vertiport.flat.FlatAEC` (``{"action_mask",
   "observations"}``) and the policy is :class:`MaskedActorCritic`, which gives illegal
   actions probability 0 (the env raises ``ValueError`` on one).
 * RLlib's ``PettingZooEnv`` does not call ``state()``. With ``with_state=True`` (the default)
@@ -35,7 +35,7 @@ from __future__ import annotations
 from typing import Any
 
 from agents.interop import require
-from agents.interop.flat import FlatObservation
+from marl_vertiport.flat import FlatAEC
 from agents.interop.nets import mlp, symlog
 from marl_vertiport import vertiport_v1
 
@@ -61,7 +61,7 @@ from ray.rllib.env.wrappers.pettingzoo_env import PettingZooEnv  # noqa: E402
 def make_env(config: Any = "paper", *, with_state: bool = True, **overrides: Any) -> PettingZooEnv:
     """RLlib's ``PettingZooEnv`` over the flattened AEC env; ``overrides`` as in
     ``vertiport_v1.env``."""
-    return PettingZooEnv(FlatObservation(vertiport_v1.env(config=config, **overrides),
+    return PettingZooEnv(FlatAEC(vertiport_v1.env(config=config, **overrides),
                                          with_state=with_state))
 
 

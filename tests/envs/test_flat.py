@@ -1,6 +1,7 @@
-"""The flat Box observation (marl_vertiport/flat.py): its column layout, its bounds on busy and
-random days of every shipped config, the Gymnasium id, and SuperSuit's observation wrappers and
-vector envs on the flat Parallel env. SB3's MaskablePPO on it: tests/tools/test_interop.py."""
+"""The flat Box observation (marl_vertiport/flat.py, the one flattener): its column layout, its
+bounds on busy and random days of every shipped config, the Gymnasium id, SuperSuit's
+observation wrappers and vector envs on the flat Parallel env, and the AEC flattener RLlib's
+adapter uses. SB3's MaskablePPO on it: tests/tools/test_interop.py."""
 
 from importlib import resources
 
@@ -14,7 +15,8 @@ import marl_vertiport  # noqa: F401  (registers the Gymnasium ids)
 from helpers import busy_action
 from marl_vertiport import vertiport_v1
 from marl_vertiport.flat import (
-    FlatObservation, FlatParallel, flat_bounds, flat_columns, flatten_observation,
+    FlatAEC, FlatObservation, FlatParallel, flat_bounds, flat_columns, flatten_arrays,
+    flatten_observation,
 )
 from marl_vertiport.gym_env import VertiportEnv
 
@@ -114,3 +116,56 @@ def test_a_cleanrl_style_vector_env_of_the_flat_id_carries_the_masks_in_its_info
         assert masks.shape == (2, n_actions)
         np.testing.assert_array_equal(obs[:, -n_actions:], masks)
         obs, _, _, _, infos = envs.step(np.array([rng.choice(np.flatnonzero(m)) for m in masks]))
+
+
+AEC_STEPS = 64
+AEC_DAY = {"schedule.episode_steps": AEC_STEPS}
+
+
+def test_the_aec_flattener_carries_the_graph_the_mask_and_the_state():
+    """FlatAEC (RLlib's PettingZooEnv reads it): the flat layout's graph columns, clipped into
+    their bounds, the mask apart, and state() flattened for a centralised critic."""
+    inner = vertiport_v1.env(config="paper", **AEC_DAY)
+    env = FlatAEC(vertiport_v1.env(config="paper", **AEC_DAY), with_state=True)
+    inner.reset(seed=3)
+    env.reset(seed=3)
+    space = env.observation_space("evtol_0")
+    assert set(space.spaces) == {"action_mask", "observations", "state"}
+    assert space["observations"].shape == (4 * 13 + 10 * 4 + 11,)
+    assert space["state"].shape == (3 + 4 * 17 + 10 * 5,)
+    rng = np.random.default_rng(0)
+    steps = 0
+    for agent in env.agent_iter():
+        obs, _, term, trunc, _ = env.last()
+        nested = inner.observe(agent)
+        assert space.contains(obs)
+        np.testing.assert_array_equal(obs["action_mask"], nested["action_mask"])
+        np.testing.assert_array_equal(
+            obs["observations"], flatten_arrays(nested["observation"], ("evtol_nodes", "port_nodes", "self")))
+        np.testing.assert_array_equal(
+            obs["state"], flatten_arrays(inner.state(), ("clock", "evtol_nodes", "port_nodes")))
+        action = None if term or trunc else int(rng.choice(np.flatnonzero(obs["action_mask"])))
+        env.step(action)
+        inner.step(action)
+        steps += action is not None
+    assert steps == AEC_STEPS
+
+
+def test_the_aec_flattener_passes_pettingzoo_api_test():
+    from pettingzoo.test import api_test
+
+    api_test(FlatAEC(vertiport_v1.env(config="paper", **AEC_DAY), with_state=True),
+             num_cycles=2 * AEC_STEPS)
+
+
+def test_the_old_path_of_the_aec_flattener_still_imports_with_a_note():
+    import importlib
+    import sys
+
+    import agents.common.names as names
+
+    names._noted.clear()
+    sys.modules.pop("agents.interop.flat", None)
+    with pytest.warns(names.RenamedWarning, match="marl_vertiport.flat.FlatAEC"):
+        module = importlib.import_module("agents.interop.flat")
+    assert module.FlatObservation is FlatAEC and module.flatten is flatten_arrays

@@ -1,9 +1,9 @@
-"""The charger study (agents/studies/capacity.py): its minutes add up, its energy is what the batteries
+"""The charger study (agents/studies/charger_study.py): its minutes add up, its energy is what the batteries
 gained on the charger, and bad input is refused."""
 
 import pytest
 
-from agents.studies.capacity import charger_day, main, summarise, table
+from agents.studies.charger_study import charger_day, main, summarise, table
 from marl_vertiport.config import load_config
 
 
@@ -37,3 +37,14 @@ def test_soak_runs_checks_and_reports_what_it_covered(capsys):
     assert "soak: 4 days (2 per layout: small (3 eVTOLs), paper (4 eVTOLs))" in out
     assert "invariants: all held" in out and "gusts" in out and "RSS" in out
     assert main(["--days", "1"]) == 2
+
+
+def test_capacity_without_names_still_runs_the_charger_study_with_a_note(capsys):
+    """Before 0.2.0 one ``capacity`` command did both jobs; with no names it was the study."""
+    import agents.common.names as names
+    from agents.studies.capacity import main as capacity_main
+
+    names._noted.clear()
+    with pytest.warns(names.RenamedWarning, match="charger-study"):
+        assert capacity_main(["--fleet", "0"]) == 2  # the charger study's own check
+    assert "fleet sizes must be >= 1" in capsys.readouterr().err

@@ -3,7 +3,8 @@
 runs three iterations on 64-step days, with a centralised critic reading ``state()``.
 
 Needs the torchrl and rllib extras (installed by `make test`); each library's tests are
-skipped with the reason where its extra is absent. The flattening wrapper needs neither."""
+skipped with the reason where its extra is absent. The flattening wrapper RLlib's adapter uses
+(marl_vertiport.flat.FlatAEC) is tested with the other flatteners, tests/envs/test_flat.py."""
 
 from __future__ import annotations
 
@@ -16,7 +17,6 @@ import numpy as np
 import pytest
 import torch
 
-from agents.interop.flat import FlatObservation, flatten
 from marl_vertiport import vertiport_v1
 
 pytestmark = pytest.mark.filterwarnings(  # TorchRL's own classes, at import
@@ -44,43 +44,6 @@ def _params(module: torch.nn.Module) -> list[torch.Tensor]:
 
 def _changed(before: list[torch.Tensor], module: torch.nn.Module) -> bool:
     return any(not torch.equal(a, b.detach()) for a, b in zip(before, module.parameters()))
-
-
-# -- the flattening (no RL library) ---------------------------------------------------------
-
-
-def test_flat_observation_carries_the_graph_the_mask_and_the_state():
-    inner = vertiport_v1.env(config="paper", **SHORT)
-    env = FlatObservation(vertiport_v1.env(config="paper", **SHORT), with_state=True)
-    inner.reset(seed=3)
-    env.reset(seed=3)
-    space = env.observation_space("evtol_0")
-    assert set(space.spaces) == {"action_mask", "observations", "state"}
-    assert space["observations"].shape == (4 * 13 + 10 * 4 + 11,)
-    assert space["state"].shape == (3 + 4 * 17 + 10 * 5,)
-    rng = np.random.default_rng(0)
-    steps = 0
-    for agent in env.agent_iter():
-        obs, _, term, trunc, _ = env.last()
-        nested = inner.observe(agent)
-        assert space.contains(obs)
-        np.testing.assert_array_equal(obs["action_mask"], nested["action_mask"])
-        np.testing.assert_array_equal(
-            obs["observations"], flatten(nested["observation"], ("evtol_nodes", "port_nodes", "self")))
-        np.testing.assert_array_equal(
-            obs["state"], flatten(inner.state(), ("clock", "evtol_nodes", "port_nodes")))
-        action = None if term or trunc else int(rng.choice(np.flatnonzero(obs["action_mask"])))
-        env.step(action)
-        inner.step(action)
-        steps += action is not None
-    assert steps == STEPS
-
-
-def test_flat_observation_passes_pettingzoo_api_test():
-    from pettingzoo.test import api_test
-
-    api_test(FlatObservation(vertiport_v1.env(config="paper", **SHORT), with_state=True),
-             num_cycles=2 * STEPS)
 
 
 # -- TorchRL --------------------------------------------------------------------------------
