@@ -157,8 +157,8 @@ def report_markdown(evaluation: Evaluation, command: str, report_path: Path,
              f"Cells are `mean [{pct} % CI]`, the CI being a percentile bootstrap of the mean "
              f"({s.bootstrap} resamples, generator seed {s.bootstrap_seed}). Per-episode numbers "
              f"are in `episodes.csv` (floats to {CSV_DIGITS} significant digits), the summary in "
-             "`summary.csv` and everything in `results.json` (full precision), next to the "
-             "figures."]
+             "`summary.csv`, and the record (settings, provenance, the summary at full "
+             "precision, each day's action counts) in `results.json`, next to the figures."]
     if s.overrides:
         parts += ["", "Config overrides: " + ", ".join(f"`{k}={v!r}`" for k, v in s.overrides)
                   + "."]

@@ -124,9 +124,30 @@ def summary_csv(evaluation: Evaluation) -> str:
     return csv_text(header, ([row[k] for k in header] for row in evaluation.summary))
 
 
+#: The lists of a result record written one entry per line (they have an entry per episode, or
+#: per agent x case x metric: thousands in a shipped set).
+ONE_LINE_ENTRIES = ("episodes", "summary")
+
+
+def record_json(doc: dict[str, Any]) -> str:
+    """``doc`` as JSON, the lists of :data:`ONE_LINE_ENTRIES` one entry per line and every
+    other value indented: valid JSON, readable in a diff, and a line per episode."""
+    parts = []
+    for key, value in doc.items():
+        if key in ONE_LINE_ENTRIES and isinstance(value, list) and value:
+            entries = ",\n".join("  " + json.dumps(e, allow_nan=True) for e in value)
+            parts.append(f" {json.dumps(key)}: [\n{entries}\n ]")
+        else:
+            text = json.dumps(value, indent=1, allow_nan=True).replace("\n", "\n ")
+            parts.append(f" {json.dumps(key)}: {text}")
+    return "{\n" + ",\n".join(parts) + "\n}\n"
+
+
 def results_json(evaluation: Evaluation, command: str) -> str:
-    """Everything: settings, per-episode metrics (with action counts), the summary (with the
-    unforced losses, and the reference agents they were measured against)."""
+    """The record of an evaluation: settings, provenance, the summary (with the unforced
+    losses, and the reference agents they were measured against), and per episode what
+    ``episodes.csv`` does not hold (its action counts; the CSV has every scalar metric)."""
+    scalar = set(evaluation.metrics)
     doc = {
         "complete": evaluation.complete,
         "error": evaluation.error,
@@ -136,10 +157,12 @@ def results_json(evaluation: Evaluation, command: str) -> str:
         "action_names": evaluation.action_names,
         "metrics": evaluation.metrics,
         "episodes": [{"agent": r.task.agent, "config": r.task.config, "episode": r.task.episode,
-                      "seed": r.task.seed, "metrics": r.metrics} for r in evaluation.records],
+                      "seed": r.task.seed,
+                      "metrics": {k: v for k, v in r.metrics.items() if k not in scalar}}
+                     for r in evaluation.records],
         "summary": evaluation.summary,
         "unforced_reference": reference_agents(evaluation.settings),
     }
-    return json.dumps(doc, indent=1, allow_nan=True) + "\n"
+    return record_json(doc)
 
 

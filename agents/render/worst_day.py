@@ -21,6 +21,7 @@ the replay matched.
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import math
 import sys
@@ -31,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from agents.common.files import write_atomic
+from agents.common.names import canonical_spec
 from agents.controllers.decisions import DecisionLog
 from agents.controllers.episode import run_episode
 from agents.controllers.registry import make_controller
@@ -113,7 +115,8 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
 
 def index_markdown(run: Path, rows: list[dict[str, Any]]) -> str:
     lines = ["# Worst days", "",
-             f"Replayed from `{run / 'results.json'}` by `{PROG}`: per controller and case, its "
+             f"Replayed from `{run / 'episodes.csv'}` and `results.json` by `{PROG}`: per "
+             "controller and case, its "
              "first day with a vehicle lost or a contact, else its day of lowest reward "
              "(agents/evaluate/worst.py), rendered around the first loss or contact (else its "
              "window of lowest reward) with each turn's decision on the frames; the day's "
@@ -156,15 +159,32 @@ def main(argv: list[str] | None = None, prog: str = PROG) -> int:
     return run_cli(build_parser(prog), _run, argv)
 
 
-def _run(args: argparse.Namespace) -> int:
-    path = args.run / "results.json"
+def _read_run(run: Path) -> tuple[dict[str, Any], list[dict[str, str]]]:
+    """An evaluation's settings (``results.json``) and its episodes (``episodes.csv``, which
+    holds every scalar metric), agents named as now; a missing or broken file is a
+    :class:`RenderError` naming it."""
+    path = run / "results.json"
     try:
-        doc = json.loads(path.read_text())
-        settings, episodes = doc["settings"], doc["episodes"]
+        settings = json.loads(path.read_text())["settings"]
     except FileNotFoundError:
         raise RenderError(f"{path} not found: give an evaluation's output folder") from None
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError) as exc:
         raise RenderError(f"{path} is not an evaluation's results.json ({exc})") from None
+    path = run / "episodes.csv"
+    try:
+        with path.open(newline="") as fh:
+            episodes = list(csv.DictReader(fh))
+        for row in episodes:  # rows made before 0.2.0 name controllers by their old names
+            row["agent"] = canonical_spec(row["agent"], note=False)
+    except FileNotFoundError:
+        raise RenderError(f"{path} not found: an evaluation writes it beside results.json") from None
+    except (KeyError, TypeError, csv.Error, UnicodeDecodeError) as exc:
+        raise RenderError(f"{path} is not an evaluation's episodes.csv ({exc})") from None
+    return settings, episodes
+
+
+def _run(args: argparse.Namespace) -> int:
+    settings, episodes = _read_run(args.run)
     size = args.size
     picks = [w for w in worst_days(episodes)
              if (args.agents is None or w.agent in args.agents)

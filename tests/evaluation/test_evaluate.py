@@ -136,7 +136,10 @@ def test_cli_writes_every_output(serial_run, capsys):
     first = doc["episodes"][0]["metrics"]
     assert len(first["action_counts"]) == len(names)
     assert sum(first["action_counts"]) == STEPS
+    assert set(first) == {"action_counts"}  # the scalar metrics are episodes.csv's alone
     assert len(doc["summary"]) == len(summary)
+    lines = (out / "results.json").read_text().splitlines()  # an episode a line, a row a line
+    assert sum(line.startswith('  {"agent"') for line in lines) == len(doc["episodes"]) + len(summary)
 
     for name in ("case_study.png", "action_distribution.png"):
         data = (out / name).read_bytes()

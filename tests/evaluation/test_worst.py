@@ -1,6 +1,7 @@
 """The worst-day pick (agents/evaluate/worst.py), its section of the report, and the replay that
 renders it with its decision log (agents/render/worst_day.py)."""
 
+import csv
 import json
 
 import pytest
@@ -45,7 +46,8 @@ def test_an_evaluation_lists_its_worst_days_and_the_replay_renders_them(tmp_path
     assert "## Worst days" in report and "python -m agents.render.worst_day" in report
     doc = json.loads((out / "results.json").read_text())
     assert doc["settings"]["rules"] == 1
-    picks = worst_days(doc["episodes"])
+    with (out / "episodes.csv").open(newline="") as fh:
+        picks = worst_days(list(csv.DictReader(fh)))  # the CSV holds every scalar metric
     assert [p.agent for p in picks] == ["random", "dispatcher"]
     assert worst_day.main([str(out), "--size", "320x240", "--window-min", "20",
                            "--before-min", "15", "--after-min", "5", "--no-progress"]) == 0
