@@ -8,7 +8,7 @@ batch size, learning rate and regret weights) but from weights drawn afresh with
 and writes each actor as a checkpoint that the evaluation loads like the run's own
 ``model_warmstart.pt``. The spread of their scores on the same days is what the fit alone
 contributes; a later training stage has to beat it to be told apart from a lucky fit
-(docs/training.md, "Does the PPO stage improve the warm start?")::
+(experiments/ensemble-warm-start-rules-v0, "Does the PPO stage improve the warm start?")::
 
     python -m agents.studies.refit runs/train/default_seed0 --seeds 1 2 3 4 --out runs/refit0
     python -m agents.evaluate --agents runs/train/default_seed0/model_warmstart.pt \\

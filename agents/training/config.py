@@ -1,5 +1,5 @@
 """The train config's schema (``configs/train/*.yaml``): every key with its default, and the
-checks that name a bad one (docs/training.md, "Configs")."""
+checks that name a bad one (docs/training.md, "Train configs")."""
 
 from __future__ import annotations
 
@@ -288,9 +288,40 @@ class TrainConfig:
                 raise ConfigError(f"{name}: {msg}")
 
 
+#: Train configs of rules v0, moved in 0.2.0 from configs/train/ into the experiments that use
+#: them: their old names still load (with a note).
+MOVED_TRAIN_CONFIGS = {
+    "paper": "experiments/paper-hyperparameters/configs/paper.yaml",
+    "scratch_v0": "experiments/scratch-ppo-rules-v0/configs/scratch_v0.yaml",
+    "scratch_independent": "experiments/centralised-critic-rules-v0/configs/scratch_independent.yaml",
+    "scratch_single": "experiments/centralised-critic-rules-v0/configs/scratch_single.yaml",
+    "factors/agent_rows": "experiments/scratch-ppo-factors-rules-v0/configs/agent_rows.yaml",
+    "factors/unscaled_reward": "experiments/scratch-ppo-factors-rules-v0/configs/unscaled_reward.yaml",
+    "factors/value_clipping": "experiments/scratch-ppo-factors-rules-v0/configs/value_clipping.yaml",
+    "ensemble_v0": "experiments/ensemble-warm-start-rules-v0/configs/ensemble_v0.yaml",
+    "single_fit": "experiments/ensemble-warm-start-rules-v0/configs/single_fit.yaml",
+    "ppo_stage/sharpened": "experiments/ensemble-warm-start-rules-v0/configs/sharpened.yaml",
+    "ppo_stage/sharpened_gamma999":
+        "experiments/ensemble-warm-start-rules-v0/configs/sharpened_gamma999.yaml",
+}
+
+
+def train_config_path(config: str | Path) -> str | Path:
+    """``config`` as ``load_train_config`` reads it: a name of :data:`MOVED_TRAIN_CONFIGS`
+    becomes its file (with a note), anything else is left as it is."""
+    name = str(config)
+    if name in MOVED_TRAIN_CONFIGS and not (TRAIN_CONFIG_DIR / f"{name}.yaml").exists():
+        moved = TRAIN_CONFIG_DIR.parents[1] / MOVED_TRAIN_CONFIGS[name]
+        note_renamed(name, MOVED_TRAIN_CONFIGS[name], "train config")
+        return moved
+    return config
+
+
 def load_train_config(config: str | Path) -> TrainConfig:
-    """A name in ``configs/train/`` or a YAML path."""
-    return load_yaml_dataclass(TrainConfig, config, TRAIN_CONFIG_DIR, "train config")
+    """A name in ``configs/train/``, a YAML path, or the name of a config that moved into
+    ``experiments/`` (:data:`MOVED_TRAIN_CONFIGS`)."""
+    return load_yaml_dataclass(TrainConfig, train_config_path(config), TRAIN_CONFIG_DIR,
+                               "train config")
 
 
 def scenario_configs(cfg: TrainConfig) -> list:

@@ -5,6 +5,7 @@ groups (no ``state()``)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,8 @@ from agents.training.config import TrainConfig
 from agents.training.runner import runner_config
 from agents.training.vec_env import MultiAgentVecEnv
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict, with_rules
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _actions_of(env: MultiAgentVecEnv, rng: np.random.Generator) -> torch.Tensor:
@@ -168,33 +171,50 @@ def test_critic_ablation_configs_differ_from_scratch_only_in_what_they_ablate():
     """(b) and (c) of the centralised-critic study extend scratch_v0.yaml (``base:``) and change
     only the critic's input or the mode, so the three runs share every other setting;
     scratch.yaml is scratch_v0.yaml under rules v1."""
-    from agents.training.config import load_train_config
+    from agents.training.config import MOVED_TRAIN_CONFIGS, load_train_config
 
-    scratch = to_dict(load_train_config("scratch_v0"))
+    def load(name):
+        return to_dict(load_train_config(ROOT / MOVED_TRAIN_CONFIGS[name]))
+
+    scratch = load("scratch_v0")
     for name, changed in [("scratch_independent", {"critic": "observation"}),
-                          ("scratch_single", {"mode": "single_agent"}), ("scratch", {"rules": 1})]:
-        cfg = to_dict(load_train_config(name))
+                          ("scratch_single", {"mode": "single_agent"})]:
+        cfg = load(name)
         assert {k: v for k, v in cfg.items() if cfg[k] != scratch[k]} == changed
+    cfg = to_dict(load_train_config("scratch"))
+    assert {k: v for k, v in cfg.items() if cfg[k] != scratch[k]} == {"rules": 1}
 
 
-def test_every_shipped_train_config_loads_and_the_sharpened_stage_keeps_the_warm_start():
-    """Every YAML file under configs/train/ (subfolders too) is a valid train config; the
+def test_every_train_config_loads_and_the_sharpened_stage_keeps_the_warm_start():
+    """Every YAML file under configs/train/ (subfolders too) is a valid train config, and so is
+    every config of rules v0 kept with its experiment, under its file or its old name; the
     default trains under rules v1 with one DAgger round and no ensemble; ensemble_v0.yaml (the
     default under rules v0) distils an ensemble of fits before PPO, single_fit.yaml is it
     without that stage, and ppo_stage/sharpened.yaml keeps single_fit's warm start (its PPO
     stage alone differs), as they were measured."""
-    from agents.training.config import TRAIN_CONFIG_DIR, load_train_config
+    from agents.common.names import RenamedWarning
+    from agents.training.config import MOVED_TRAIN_CONFIGS, TRAIN_CONFIG_DIR, load_train_config
 
     files = sorted(TRAIN_CONFIG_DIR.rglob("*.yaml"))
-    assert len(files) >= 9
+    assert [p.relative_to(TRAIN_CONFIG_DIR).as_posix() for p in files] == [
+        "default.yaml", "ppo_stage/long.yaml", "scratch.yaml"]
     for path in files:
-        load_train_config(path)
+        assert load_train_config(path).rules == 1  # configs/train/ runs under today's rules
+    for name, path in MOVED_TRAIN_CONFIGS.items():
+        assert (ROOT / path).is_file() and load_train_config(ROOT / path).rules == 0
+        with pytest.warns(RenamedWarning, match="moved|is now"):
+            import agents.common.names as names
+
+            names._noted.clear()
+            assert load_train_config(name) == load_train_config(ROOT / path)
     default = to_dict(load_train_config("default"))
     assert default["rules"] == 1 and default["ensemble"]["fits"] == 0
     assert default["pretrain"]["dagger_rounds"] == 1 and default["pretrain"]["teacher"] == "planner"
-    old = to_dict(load_train_config("ensemble_v0"))
-    single = to_dict(load_train_config("single_fit"))
-    stage = to_dict(load_train_config("ppo_stage/sharpened"))
+
+    def load(name):
+        return to_dict(load_train_config(ROOT / MOVED_TRAIN_CONFIGS[name]))
+
+    old, single, stage = load("ensemble_v0"), load("single_fit"), load("ppo_stage/sharpened")
     assert old["rules"] == 0 and old["ensemble"]["fits"] == 4 and single["ensemble"]["fits"] == 0
     assert {k: v for k, v in single.items() if v != old[k]} == {"ensemble": single["ensemble"]}
     for key in ("pretrain", "model", "scenarios", "seed", "lost_vehicle_penalty", "mode", "ensemble"):
