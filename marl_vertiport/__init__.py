@@ -18,7 +18,7 @@ from marl_vertiport.sim.geometry import closest_approach
 __all__ = ["ENV_ID", "ConfigError", "EnvConfig", "IllegalActionError", "closest_approach",
            "load_config", "vertiport_v0", "vertiport_v1"]
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 # The Gymnasium id, without loading Gymnasium here (marl_vertiport/registration.py).
 register_when_gymnasium_loads()

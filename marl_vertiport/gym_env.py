@@ -29,8 +29,11 @@ Arguments:
     ``config``, ``render_mode`` and keyword overrides, as in the AEC env.
 
 Version History:
-    v1: the separation check and airspace procedures of ``vertiport_v1``.
-    v0: initial release.
+    * v1: the separation check and airspace procedures of ``vertiport_v1`` and its calibrated
+      cruise drain (``battery.cruise_drain_scale`` 0.25) (2026-11-26); the same env with a flat
+      ``Box`` observation as ``marl_vertiport/VertiportFlat-v1`` (2026-11-28). CHANGELOG.md,
+      "Rules versions", dates every change.
+    * v0: initial release (2026-11-22); ``marl_vertiport/Vertiport-v0`` keeps it bit for bit.
 """
 
 from __future__ import annotations

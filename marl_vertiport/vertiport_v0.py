@@ -9,8 +9,11 @@ radial. ``atc.separation_check`` and ``flight.arrival_altitude_m`` are set to th
 whatever the config says (:func:`marl_vertiport.config.with_rules`).
 
 Version history:
-    v0: initial release.
-    v1: :mod:`marl_vertiport.vertiport_v1`.
+    * v1: :mod:`marl_vertiport.vertiport_v1`: the separation check, its airspace procedures and
+      the calibrated cruise drain (2026-11-26).
+    * v0: initial release (2026-11-22). Its episodes are the simulator's at a790a05
+      (2026-11-26), kept bit for bit since; ``parallel_env()`` added (2026-11-28). CHANGELOG.md,
+      "Rules versions", lists what a v0 user may still notice.
 """
 
 from __future__ import annotations

@@ -44,13 +44,18 @@ Arguments:
     ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``; keyword overrides with dotted
     keys (``**{"uncertainty.wind_gust_prob": 0.1}``) or whole sections.
 
-Version history:
-    v1 (later): ``parallel_env()``, the Parallel API.
-    v1: the separation check and the airspace procedures (arrivals at
-    ``flight.arrival_altitude_m``, holding slots, a reversing gust held inside the protected
-    volume); ``info["episode"]`` adds the day's minimum separation and its minutes in loss of
-    separation. Masks of vehicles in flight may drop "avoid collision" (no layer clears).
-    v0: initial release (:mod:`marl_vertiport.vertiport_v0`, kept bit for bit).
+Version history (CHANGELOG.md, "Rules versions", dates every change):
+    * v1 (2026-11-26, 5134449): the ATC's separation check and airspace procedures: departures
+      at ``flight.departure_altitude_m``, holding slots and arrivals at
+      ``flight.arrival_altitude_m``, a reversing gust held inside the protected volume;
+      ``info["episode"]`` adds ``min_separation_m`` and ``separation_loss_min``; masks of
+      vehicles in flight may drop "avoid collision". Changed after publication, the same day:
+      the procedures' altitudes and flows, clearances behind a departure
+      (``atc.trail_departures``), and the energy calibration (``battery.cruise_drain_scale``
+      0.25, 4c3b34d: every v1 episode changed); later ``reserve_violations`` and
+      ``trail_hold_min`` in ``info["episode"]`` (2026-11-26, -27), the Parallel API
+      (2026-11-28), ``uncertainty.common_random_numbers`` (2026-11-30, off by default).
+    * v0 (2026-11-22): initial release; kept bit for bit as :mod:`marl_vertiport.vertiport_v0`.
 """
 
 

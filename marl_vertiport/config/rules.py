@@ -1,5 +1,7 @@
 """The env's rules versions, as PettingZoo versions its envs: a change of behaviour is a new
-version, and the old one keeps its behaviour bit for bit.
+version, and the old one keeps its behaviour bit for bit (CHANGELOG.md, "Rules versions", lists
+every version and every change made to v1 after it was first published, the energy calibration
+among them).
 
 - **v1** (``vertiport_v1``, ``marl_vertiport/Vertiport-v1``; the schema's defaults): the ATC's
   separation check and the airspace procedures of :mod:`marl_vertiport.sim.clearance`
