@@ -34,7 +34,7 @@ _UNBATCHED_NDIM = {"port_nodes": 2, "evtol_nodes": 2, "self": 1, "action_mask": 
 
 def complete_edge_index(n: int) -> np.ndarray:
     """Edges of a complete directed graph without self-loops, shape ``(2, n (n - 1))``: both
-    graphs of an observation are complete (docs/environment.md, section 5.4)."""
+    graphs of an observation are complete (docs/observations.md, section 5.4)."""
     src, dst = np.nonzero(~np.eye(n, dtype=bool))
     return np.stack([src, dst]).astype(np.int64)
 

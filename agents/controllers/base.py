@@ -55,7 +55,7 @@ class Controller:
 
 
 class Observation:
-    """Named access to one AEC observation (see docs/environment.md, section 5, and
+    """Named access to one AEC observation (see docs/observations.md, section 5, and
     docs/controllers.md).
 
     Reading the graphs: ``fleet(name)`` is a column of the eVTOL graph, one value per vehicle

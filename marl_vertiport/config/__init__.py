@@ -2,7 +2,7 @@
 typed YAML loading every schema of the project uses (:mod:`~marl_vertiport.config.typed`).
 
 ``from marl_vertiport.config import load_config, EnvConfig, ConfigError`` is the public API;
-docs/environment.md documents every key.
+docs/configs.md documents every key.
 """
 
 from marl_vertiport.config.env import (

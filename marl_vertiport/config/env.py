@@ -124,7 +124,7 @@ class BatteryConfig:
     """Rules v1: the fraction of each metre flown that the cruise drain charges, so that an
     operation costs the battery what it costs in the paper's code, whose destinations lie 8-11 m
     away: a round trip here, take-off to a hover spot, covers about four times the distance
-    (``docs/environment.md``, section 8). Rules v0: 1 (so is it in the ``paper_overloaded``
+    (``docs/battery-and-uncertainty.md``, section 8.1). Rules v0: 1 (so is it in the ``paper_overloaded``
     stress scenario)."""
     hover_drain_pct: float = 2.0
     """Drain of an airborne vehicle that moved less than ``min_cruise_distance_m``."""

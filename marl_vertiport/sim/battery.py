@@ -13,7 +13,7 @@
 * out of service: 0.
 
 Levels are clipped to ``[0, 100]``. The status that counts is the one during the step (after the
-action). docs/environment.md, section 8, and docs/energy.md (the taper); the energy a planned
+action). docs/battery-and-uncertainty.md, section 8, and docs/energy.md (the taper); the energy a planned
 flight needs is :mod:`marl_vertiport.sim.energy`.
 """
 

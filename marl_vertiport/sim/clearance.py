@@ -23,7 +23,7 @@ A clearance (a take-off, a move to a node, an avoidance climb, a hover spot for 
 vehicle, a holding slot) is legal only if its volume clears every other vehicle's reservation;
 the action mask says so (:meth:`Clearance.mask_reasons` says why an action is masked).
 
-Procedures (docs/environment.md, section 7.4): departures climb on their pad to
+Procedures (docs/reward-and-safety.md, section 7.4): departures climb on their pad to
 ``flight.departure_altitude_m``, above every other flow, and leave on their destination's
 bearing; arrivals come back at ``flight.arrival_altitude_m`` to a holding slot of their own on
 the airspace boundary, and go from there to a hover spot when the route clears. Emergency

@@ -2,7 +2,7 @@
 defined once for the simulator, the evaluation and the training logs.
 
 The paper reports total reward, mean battery, good take-offs and landings, delay and collisions
-(section IV); the rest are ours (docs/environment.md, section 9). ``min_separation_m`` is the
+(section IV); the rest are ours (docs/observations.md, section 10.2). ``min_separation_m`` is the
 smallest centre distance of two vehicles in the airspace over the day (swept over each step; NaN
 for a day with fewer than two), ``separation_loss_min`` the minutes in which some pair was in
 loss of separation; ``trail_hold_min`` the vehicle-minutes in which a flight cleared behind a

@@ -14,7 +14,7 @@ with every term in ``[-M, +M]`` (``M = reward.term_magnitude``, 5):
   "avoid collision", ``-M`` when it is in one and the action is anything else, 0 otherwise
   (the probe itself is :mod:`marl_vertiport.sim.safety`).
 
-Default weights ``(0.3, 0.3, 0.35, 0.1, 0.35)`` (table II). docs/environment.md, section 6.
+Default weights ``(0.3, 0.3, 0.35, 0.1, 0.35)`` (table II). docs/reward-and-safety.md, section 6.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ the reward (eq. 5, :mod:`marl_vertiport.sim.reward`) reads the acting vehicle's 
 **Separation flown.** A loss of separation is a pair whose minimum distance over the step, with
 both moving linearly between their start and end positions, is below the separation.
 
-docs/environment.md, section 7. The geometry is :mod:`marl_vertiport.sim.geometry`.
+docs/reward-and-safety.md, section 7. The geometry is :mod:`marl_vertiport.sim.geometry`.
 """
 
 from __future__ import annotations

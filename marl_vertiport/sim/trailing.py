@@ -12,7 +12,7 @@ clearance had to clear, :meth:`Clearance._apply_separation_check`).
 
 Why it is there: a departure holds the column over its pad through its climb and its
 outbound leg until it leaves; with whole-leg reservations alone the pad it left and every
-way across its path stay closed that long (docs/environment.md, section 7.4).
+way across its path stay closed that long (docs/reward-and-safety.md, section 7.4).
 """
 
 from __future__ import annotations

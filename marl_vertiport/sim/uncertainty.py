@@ -1,4 +1,4 @@
-"""The paper's uncertainties (case 2, section IV; docs/environment.md, section 9), each drawn
+"""The paper's uncertainties (case 2, section IV; docs/battery-and-uncertainty.md, section 9), each drawn
 from the env's one seeded generator in a fixed order, so an episode is reproducible from its
 seed and actions:
 
