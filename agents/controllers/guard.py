@@ -90,6 +90,7 @@ from agents.common.names import canonical_kwargs, note_renamed
 from agents.controllers.base import Controller
 from agents.controllers.lookahead_settings import PREFERRED_COLUMN, LookaheadSettings
 from agents.controllers.planner import ScratchRollouts, nominal_config, roll_out
+from agents.controllers.search import wide_choice
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
 
@@ -384,6 +385,8 @@ class GuardController(ScratchRollouts, Controller):
         legal = np.flatnonzero(observation["action_mask"]).tolist()
         if len(legal) < 2:
             return choice
+        if s.candidates > 0:
+            return wide_choice(self, sim, observation, legal)
         self.checks += 1
         first, least = self.evaluate(sim, [choice], stop_at_loss=True)
         if s.margin_pct > 0 and not self.last_deferred and (

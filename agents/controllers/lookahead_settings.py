@@ -86,7 +86,14 @@ class LookaheadSettings:
     reward_margin: float | None = None
     """Where the proposer's choice passes its check and the rollout policy's differs, the
     latter is taken if its rollouts (the same draws) lose no vehicle and earn at least this
-    much more reward on average (``None``: never)."""
+    much more reward on average (``None``: never). In the wide search, what another candidate
+    must earn over the rollout policy's choice (``None``: any more)."""
+    candidates: int = 0
+    """The wide search (:mod:`agents.controllers.search`): at each decision that matters, roll
+    out the rollout policy's choice and the proposer's ``candidates`` most probable legal
+    actions (every legal one where the proposer has no probabilities, or where ``candidates``
+    is at least their number) with the same draws, and take the one that loses the fewest
+    vehicles, then earns the most (0: the two-candidate look-ahead above)."""
 
     def __post_init__(self) -> None:
         if self.horizon_min <= 0:
@@ -105,6 +112,8 @@ class LookaheadSettings:
         if self.clairvoyant and self.nominal:
             raise ValueError("clairvoyant rollouts draw the env's own future: they cannot also "
                              "be nominal (without the config's uncertainties)")
+        if self.candidates < 0:
+            raise ValueError(f"candidates must be >= 0, got {self.candidates}")
         if self.prefer not in PREFERRED_COLUMN:
             raise ValueError(f"prefer must be one of {sorted(PREFERRED_COLUMN)}, "
                              f"got {self.prefer!r}")

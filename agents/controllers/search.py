@@ -1,0 +1,78 @@
+"""The wide look-ahead search: more than two candidates, rolled out with the same draws.
+
+With ``candidates=k`` (:class:`~agents.controllers.lookahead_settings.LookaheadSettings`) the
+look-ahead (:class:`~agents.controllers.guard.GuardController`) does not check the proposer's
+one choice: at every decision that matters it rolls out the rollout policy's own choice and the
+proposer's ``k`` most probable legal actions (every legal action where the proposer gives no
+probabilities), ``samples`` times each over ``horizon_min`` minutes with the config's gusts and
+failures, every candidate meeting the same draws (common random numbers), the rollout policy
+flying the fleet after the decision's own step. It takes the candidate that loses the fewest
+vehicles on average; among those, the most reward, the rollout policy's choice unless another
+earns at least ``reward_margin`` more (0 by default here: any more).
+
+This is one step of rollout policy improvement over the rollout policy (Bertsekas's rollout
+algorithm, with the proposer pruning the candidates): in expectation over the sampled futures
+it does no worse than the rollout policy, up to the horizon and the samples' noise. The
+proposer matters only through which candidates it offers: with ``proposer=dispatcher`` and
+``candidates`` at least the number of legal actions, the search is the same machinery with no
+learned part, the control of any claim that learning helps.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from marl_vertiport.sim.core import VertiportSim
+
+__all__ = ["candidate_actions", "wide_choice"]
+
+
+def candidate_actions(proposer: Any, observation: dict, legal: list[int], k: int,
+                      also: int) -> list[int]:
+    """``also`` (the rollout policy's choice) and the ``k`` legal actions ``proposer`` finds most
+    probable (its ``action_probabilities``), in that order, without repeats, ties in probability
+    to the lower action index; ``also`` and every legal action where the proposer has no
+    probabilities."""
+    probabilities = getattr(proposer, "action_probabilities", None)
+    p = None if probabilities is None else probabilities(observation)
+    if p is None:
+        return [also, *(a for a in legal if a != also)]
+    ranked = sorted(legal, key=lambda a: (-float(p[a]), a))
+    out = [also]
+    for a in ranked:
+        if len(out) > k:
+            break
+        if a not in out:
+            out.append(a)
+    return out
+
+
+def wide_choice(guard: Any, sim: VertiportSim, observation: dict, legal: list[int]) -> int:
+    """The wide search's action for the acting vehicle of ``sim`` (module docstring); records
+    the candidates' values in ``guard.last_values`` and who the choice came from: the rollout
+    policy (``last_deferred``), the proposer's own choice, or another candidate the search found
+    better (``last_changed``)."""
+    s = guard.settings
+    base = int(guard.rollout_policy.act(observation))
+    proposed = int(guard.proposer.act(observation))
+    candidates = candidate_actions(guard.proposer, observation, legal, s.candidates, base)
+    if proposed not in candidates:
+        candidates.append(proposed)
+    guard.checks += 1
+    values, _ = guard.evaluate(sim, candidates, runs=guard._compare_runs)
+    guard.last_values = values
+    fewest = min(v[0] for v in values.values())
+    eligible = [a for a in candidates if values[a][0] <= fewest]
+    best = max(eligible, key=lambda a: (values[a][1], a == base))  # a tie goes to the base
+    margin = s.reward_margin or 0.0
+    if base in eligible and values[best][1] < values[base][1] + margin:
+        best = base
+    guard.last_deferred = best == base
+    guard.last_changed = best not in (base, proposed)
+    if guard.last_deferred:
+        guard.deferrals += 1
+    if best != proposed:
+        guard.changes += 1
+    return int(best)

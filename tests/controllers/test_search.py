@@ -1,0 +1,100 @@
+"""The wide look-ahead search (``candidates=k``): which candidates it rolls out, that it takes
+the one that loses the fewest and earns the most with the same draws for all, and that the
+rollout policy's choice keeps ties."""
+
+import numpy as np
+import pytest
+from helpers import FixedAction, dispatcher_decision
+
+from agents.controllers.guard import GuardController
+from agents.controllers.lookahead_settings import LookaheadSettings
+from agents.controllers.registry import make_controller
+from agents.controllers.search import candidate_actions
+from marl_vertiport import vertiport_v1
+from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
+
+
+class _Prefers:
+    """A proposer with fixed probabilities over the actions."""
+
+    def __init__(self, p):
+        self.p = np.asarray(p, dtype=float)
+
+    def action_probabilities(self, observation):
+        return self.p * observation["action_mask"]
+
+    def act(self, observation):
+        return int(np.argmax(self.action_probabilities(observation)))
+
+
+def test_candidates_are_the_rollout_policys_choice_then_the_proposers_most_probable():
+    obs = {"action_mask": np.array([1, 1, 0, 1, 1], dtype=np.int8)}
+    legal = [0, 1, 3, 4]
+    proposer = _Prefers([0.1, 0.2, 0.0, 0.5, 0.2])
+    assert candidate_actions(proposer, obs, legal, 1, also=0) == [0, 3]
+    assert candidate_actions(proposer, obs, legal, 2, also=0) == [0, 3, 1]  # tie: lower index
+    assert candidate_actions(proposer, obs, legal, 2, also=3) == [3, 1, 4]
+    assert candidate_actions(proposer, obs, legal, 99, also=4) == [4, 3, 1, 0]
+    # A proposer without probabilities offers every legal action.
+    assert candidate_actions(FixedAction(1), obs, legal, 1, also=4) == [4, 0, 1, 3]
+
+
+def test_the_setting_is_checked():
+    with pytest.raises(ValueError, match="candidates"):
+        LookaheadSettings(candidates=-1)
+    assert make_controller("lookahead[candidates=3]").settings.candidates == 3
+
+
+def test_the_wide_search_takes_the_best_candidate_by_its_rollouts():
+    """At decisions with a choice, the action taken is, among the candidates it rolled out,
+    one that loses the fewest vehicles and, of those, earns the most; the dispatcher's choice
+    is always a candidate and keeps a tie."""
+    env = vertiport_v1.env(config="paper", **{"schedule.episode_steps": 200})
+    search = GuardController(proposer="dispatcher", rollout_policy="dispatcher", nominal=True,
+                             horizon_min=30, quiet_pct=101.0, candidates=99)
+    env.reset(seed=3)
+    search.reset(seed=3)
+    search.bind(env.unwrapped.sim)
+    sim = env.unwrapped.sim
+    dispatcher = make_controller("dispatcher")
+    dispatcher.bind(sim)
+    checked = changed = 0
+    for agent in env.agent_iter():
+        if env.terminations[agent] or env.truncations[agent]:
+            env.step(None)
+            continue
+        obs = env.observe(agent)
+        legal = np.flatnonzero(obs["action_mask"]).tolist()
+        status = sim.status[sim.acting]
+        base = dispatcher.act(obs)
+        action = search.act(obs)
+        if len(legal) > 1 and status in (ON_PORT, ON_CHARGER, HOVERING):
+            values = search.last_values
+            assert set(values) == set(legal) and base in values  # every legal action, here
+            fewest = min(v[0] for v in values.values())
+            best_reward = max(v[1] for v in values.values() if v[0] <= fewest)
+            assert values[action][0] == fewest and values[action][1] == best_reward
+            if values[base][0] <= fewest and values[base][1] == best_reward:
+                assert action == base
+            checked += 1
+            changed += action != base
+        env.step(action)
+    assert checked > 20 and changed > 0  # it looked, and it found something better
+    search.close()
+    env.close()
+
+
+def test_the_wide_search_decides_the_same_from_the_same_state():
+    env = vertiport_v1.env(config="paper_uncertain", **{"schedule.episode_steps": 60})
+    _, obs, _, legal = dispatcher_decision(env, lambda sim, obs, legal, choice: (
+        len(legal) >= 3 and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)))
+    sim = env.unwrapped.sim
+    picks = []
+    for _ in range(2):
+        search = make_controller("lookahead[candidates=2,horizon_min=20,samples=2]")
+        search.reset(seed=0)
+        search.bind(sim)
+        picks.append((search.act(obs), dict(search.last_values)))
+        search.close()
+    assert picks[0] == picks[1] and len(picks[0][1]) >= 2
+    env.close()
