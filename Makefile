@@ -61,7 +61,7 @@ test: $(STAMP)  ## run the whole test suite (API checks, parity, physics, reward
 test-fast: $(STAMP)  ## the test suite without the full-episode tests
 	$(PY) -m pytest -q -m "not slow and not replay"
 
-check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (3 minutes on a 2-core Intel Xeon)
+check-results: $(STAMP)  ## the shipped results name the shipped checkpoint, and the first 2 days of every row replay exactly (8 minutes on an idle 2-core AMD EPYC)
 	$(PY) -m pytest -q -m replay tests/tools/test_shipped_results.py
 
 soak: $(STAMP)  ## many days with every uncertainty high on six layouts: invariants after every step, memory (under a minute on an idle 2-core AMD EPYC)
