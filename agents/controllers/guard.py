@@ -170,6 +170,9 @@ class GuardController(ScratchRollouts, Controller):
         #: mean reward, mean least charge %) over its rollouts; empty where the proposer's
         #: choice stood unchallenged.
         self.last_values: dict[int, tuple[float, float, float]] = {}
+        #: The wide search's value of each candidate of its last decision (reward less
+        #: :data:`~agents.controllers.search.LOSS_COST` per vehicle lost, on average).
+        self.search_q: dict[int, float] = {}
         #: This episode's decisions checked by rollouts, decisions changed, decisions handed to
         #: the rollout policy (``defer_pct``, ``margin_pct``, ``reward_margin``), and those of
         #: them where the rollout policy's choice earned more in the rollouts
@@ -305,9 +308,12 @@ class GuardController(ScratchRollouts, Controller):
     # ------------------------------------------------------------------ decisions
     @property
     def last_q(self) -> dict[int, float]:
-        """For a teacher (:mod:`agents.training.imitation`): the proposer's values of the
-        candidates of the last decision, where the proposer took it and its choice stood (empty
-        otherwise or if the proposer has none)."""
+        """For a teacher (:mod:`agents.training.imitation`): the values of the candidates of the
+        last decision. The wide search's own (:func:`agents.controllers.search.wide_choice`);
+        else the proposer's, where the proposer took it and its choice stood (empty otherwise
+        or if the proposer has none)."""
+        if self.settings.candidates > 0:
+            return dict(self.search_q)
         if self.last_changed or self.last_deferred:
             return {}
         return dict(getattr(self.proposer, "last_q", {}) or {})
@@ -316,6 +322,9 @@ class GuardController(ScratchRollouts, Controller):
     def last_forced(self) -> bool:
         """Whether the last decision ruled a legal action out as unsafe: the look-ahead changed
         the proposer's choice, which lost a vehicle (or the proposer itself ruled one out)."""
+        if self.settings.candidates > 0:  # the wide search: a candidate lost more than another
+            lost = [v[0] for v in self.last_values.values()]
+            return bool(lost) and max(lost) > min(lost)
         return self.last_changed or bool(getattr(self.proposer, "last_forced", False))
 
     def action_probabilities(self, observation: dict) -> np.ndarray | None:
@@ -375,7 +384,7 @@ class GuardController(ScratchRollouts, Controller):
                 choice = self._handed_over(observation)
             if choice in hops:
                 choice = sim.actions.stay
-        self.last_values = {}
+        self.last_values, self.search_q = {}, {}
         self.last_changed = False
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING) or sim.step_count < self._quiet_until_step:
             return choice

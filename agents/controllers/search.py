@@ -26,7 +26,12 @@ import numpy as np
 
 from marl_vertiport.sim.core import VertiportSim
 
-__all__ = ["candidate_actions", "wide_choice"]
+__all__ = ["LOSS_COST", "candidate_actions", "wide_choice"]
+
+#: The reward a lost vehicle is worth in the candidates' values a teacher reads (``search_q``):
+#: more than any reward a day's rollout earns, so that the values order the candidates as the
+#: search does, the fewest lost first (the planner's stranding penalty).
+LOSS_COST = 1000.0
 
 
 def candidate_actions(proposer: Any, observation: dict, legal: list[int], k: int,
@@ -63,6 +68,7 @@ def wide_choice(guard: Any, sim: VertiportSim, observation: dict, legal: list[in
     guard.checks += 1
     values, _ = guard.evaluate(sim, candidates, runs=guard._compare_runs)
     guard.last_values = values
+    guard.search_q = {a: v[1] - LOSS_COST * v[0] for a, v in values.items()}
     fewest = min(v[0] for v in values.values())
     eligible = [a for a in candidates if values[a][0] <= fewest]
     best = max(eligible, key=lambda a: (values[a][1], a == base))  # a tie goes to the base

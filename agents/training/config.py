@@ -32,8 +32,9 @@ class PretrainConfig:
     start_steps: int = 120
     """Steps of each of those episodes."""
     teacher: str = "planner"
-    """``planner`` (the look-ahead planner), ``guarded_planner`` (the planner behind the guard)
-    or ``dispatcher`` (the expert dispatcher): :mod:`agents.training.teachers`."""
+    """``planner`` (the look-ahead planner), ``guarded_planner`` (the planner behind the guard),
+    ``search`` (the wide look-ahead search, with the config's uncertainties) or ``dispatcher``
+    (the expert dispatcher): :mod:`agents.training.teachers`."""
     planner_horizon: int = 40
     """Steps the planner simulates per candidate action."""
     planner_margin: float = 3.0

@@ -9,6 +9,12 @@
   (the dispatcher flies the guard's rollouts, with the config's uncertainties): the planner's
   choice stands unless it loses a vehicle where another action loses fewer. A decision the
   guard changes is weighted as one whose wrong choice loses a vehicle (``regret_cap``).
+- ``search``: the wide look-ahead search of :mod:`agents.controllers.search` over every legal
+  action, the dispatcher flying its rollouts, four samples of the config's gusts and failures
+  each over two hours, every candidate meeting the same draws: the teacher that knows the
+  uncertainty the planner's nominal model leaves out. Its candidates' values (reward less 1 000
+  per vehicle lost) weight the decisions (``regret_cap``), and a decision where one candidate
+  loses a vehicle another keeps weighs as one that loses a vehicle.
 - ``dispatcher``: the expert dispatcher itself.
 
 The names before 0.2.0 (``rollout``, ``guarded_rollout``, ``heuristic``) still load, with a note
@@ -19,7 +25,7 @@ from __future__ import annotations
 
 from typing import Any
 
-TEACHERS = ("planner", "guarded_planner", "dispatcher")
+TEACHERS = ("planner", "guarded_planner", "search", "dispatcher")
 
 #: The planner's options a training config may set (``pretrain.planner_<option>``).
 PLANNER_OPTIONS = ("expect_failures", "rescue")
@@ -42,6 +48,14 @@ def make_teacher(name: str, planner_horizon: int, planner_margin: float, seed: i
         raise ValueError(f"planner options {sorted(unknown)}: use some of {PLANNER_OPTIONS}")
     if name == "dispatcher":
         return DispatcherController()
+    if name == "search":
+        from agents.controllers.guard import GuardController
+        from agents.controllers.lookahead_settings import LookaheadSettings
+
+        return GuardController(proposer=DispatcherController(),
+                               rollout_policy=DispatcherController(),
+                               settings=LookaheadSettings(quiet_pct=101.0, candidates=99,
+                                                          seed=seed))
     if name not in TEACHERS:
         raise ValueError(f"teacher {name!r}: use one of {TEACHERS}")
     planner = PlannerController(horizon=planner_horizon, margin=planner_margin, seed=seed,

@@ -98,3 +98,27 @@ def test_the_wide_search_decides_the_same_from_the_same_state():
         search.close()
     assert picks[0] == picks[1] and len(picks[0][1]) >= 2
     env.close()
+
+
+def test_the_search_teacher_labels_with_its_candidates_values():
+    """As a teacher (pretrain.teacher: search) the wide search gives its label and the value of
+    every legal action it rolled out, a vehicle lost worth LOSS_COST of reward, and calls a
+    decision forced where one candidate loses a vehicle that another keeps."""
+    from agents.controllers.search import LOSS_COST
+    from agents.training.teachers import make_teacher
+
+    teacher = make_teacher("search", 40, 3.0, seed=5)
+    assert teacher.settings.candidates >= 99 and teacher.settings.samples == 4
+    env = vertiport_v1.env(config="paper_uncertain", **{"schedule.episode_steps": 60})
+    _, obs, _, legal = dispatcher_decision(env, lambda sim, obs, legal, choice: (
+        len(legal) >= 2 and sim.status[sim.acting] in (ON_PORT, ON_CHARGER, HOVERING)))
+    teacher.reset(seed=0)
+    teacher.bind(env.unwrapped.sim)
+    label = teacher.act(obs)
+    q = teacher.last_q
+    assert set(q) == set(legal) and label in q
+    assert q == {a: v[1] - LOSS_COST * v[0] for a, v in teacher.last_values.items()}
+    lost = [v[0] for v in teacher.last_values.values()]
+    assert teacher.last_forced == (max(lost) > min(lost))
+    teacher.close()
+    env.close()
