@@ -14,6 +14,7 @@ import numpy as np
 
 from agents.controllers.episode import run_aec_episode
 from agents.controllers.registry import make_controller
+from agents.evaluate.metrics import with_aliases
 from agents.evaluate.settings import EpisodeRecord, EpisodeTask, EvalSettings, Overrides
 from agents.execution import Backend, LocalBackend
 from agents.execution.base import raised_at
@@ -81,7 +82,7 @@ def run_task(task: EpisodeTask) -> EpisodeRecord:
         else:
             error = f"{type(exc).__name__}: {exc} ({raised_at(exc)})"
         return EpisodeRecord(task, error=error, seconds=time.perf_counter() - start)
-    plain = {k: _plain(v) for k, v in metrics.items()}
+    plain = with_aliases({k: _plain(v) for k, v in metrics.items()})
     return EpisodeRecord(task, metrics=plain, seconds=time.perf_counter() - start)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -9,7 +10,9 @@ from typing import Any
 
 from agents.common.provenance import describe
 from agents.common.files import write_atomic
-from agents.evaluate.metrics import DIRECTION, METRIC_LABELS, agent_label, case_label
+from agents.evaluate.metrics import (
+    DIRECTION, HIDDEN_METRICS, METRIC_LABELS, VEHICLES_LOST, agent_label, case_label,
+)
 from agents.evaluate.settings import ACTION_EPISODES, Evaluation
 from agents.evaluate.worst import worst_days
 from agents.evaluate.tables import (
@@ -33,14 +36,18 @@ positive take-off / landing term (on time and with enough charge); *take-offs* a
 count all of them, *failed take-offs* those lost to the uncertainty of case 2.
 *Mean delay* is the lateness (minutes) of operations done more than the tolerance late, plus
 those still pending at the end, summed per eVTOL and averaged over the fleet.
-*Collisions* are the paper's collisions: steps in which a conflict was predicted for the acting
-eVTOL and it was not told to avoid it (safety term S = -5); *avoided conflicts* are steps with
-S = +5. *Separation losses* (two eVTOLs closer than the minimum separation during a step) and
+*Unresolved conflicts* are what the paper calls collisions (the column `collisions` of the
+files): steps in which a conflict was predicted for the acting eVTOL and it was not told to
+avoid it (safety term S = -5). They are predictions of the paper's conflict probe, not
+collisions: no vehicle touched another. *Avoided conflicts* are steps with S = +5.
+*Separation losses* (two eVTOLs closer than the minimum separation during a step) and
 *contacts* (two bodies touching) are measured by the physics engine and do not enter the
-reward. *Lost in the air* counts eVTOLs whose battery ran out in flight (an emergency landing;
-out of service for the rest of the day; the paper's battery depletions); *lost on the ground*
-counts eVTOLs left on a normal port with a battery from which no flight the ATC may clear
-reaches a charger (they never serve again that day); *service lost* adds up the minutes from
+reward. *Vehicles lost* (`vehicles_lost`, also `stranded` in the files) adds up the two ways
+to lose one: *lost in the air* counts eVTOLs whose battery ran out in flight (an emergency
+landing; out of service for the rest of the day; the paper's battery depletions, also
+`battery_depletions` in the files); *lost on the ground* counts eVTOLs left on a normal port
+with a battery from which no flight the ATC may clear reaches a charger (they never serve
+again that day); *service lost* adds up the minutes from
 each loss to the end of the day. *Unforced losses/day* are, on each day, the vehicles an agent
 lost beyond the fewest that any reference agent (`dispatcher`, `planner` and `guard`, those
 of them evaluated) lost on the same day, averaged over the days a
@@ -68,8 +75,12 @@ def _ranking_findings(evaluation: Evaluation, config: str) -> list[str]:
     for metric, sign in DIRECTION.items():
         if metric not in evaluation.metrics:
             continue
-        rows = sorted((evaluation.stat(a, config, metric) for a in agents),
-                      key=lambda r: -sign * r["mean"])
+        # A metric undefined for some agent's days (NaN: a separation with a fleet of one) is
+        # not ranked: there is nothing to compare.
+        rows = [evaluation.stat(a, config, metric) for a in agents]
+        if any(r is None or not math.isfinite(r["mean"]) for r in rows):
+            continue
+        rows.sort(key=lambda r: -sign * r["mean"])
         best, second = rows[0], rows[1]
         word = "highest" if sign > 0 else "lowest"
         label = METRIC_LABELS.get(metric, metric)
@@ -96,7 +107,7 @@ def _case_change_findings(evaluation: Evaluation) -> list[str]:
         for agent in s.agents:
             parts = []
             for metric in ("total_reward", "good_takeoffs", "good_landings", "mean_delay_min",
-                           "collisions", "battery_depletions"):
+                           "collisions", VEHICLES_LOST):
                 a, b = (evaluation.stat(agent, base, metric), evaluation.stat(agent, other, metric))
                 if a is None or b is None:
                     continue
@@ -112,7 +123,7 @@ def _case_change_findings(evaluation: Evaluation) -> list[str]:
 def _report_table(evaluation: Evaluation, config: str) -> str:
     agents = [a for a in evaluation.settings.agents
               if evaluation.stat(a, config, evaluation.metrics[0]) is not None]
-    metrics = [m for m in summary_metrics(evaluation) if m != "steps"]
+    metrics = [m for m in summary_metrics(evaluation) if m not in HIDDEN_METRICS]
     lines = ["| metric | " + " | ".join(agent_label(a) for a in agents) + " |",
              "|---|" + "---:|" * len(agents)]
     for metric in metrics:

@@ -10,7 +10,7 @@ from typing import Any, Iterable, Sequence
 
 
 from agents.evaluate.metrics import (
-    DERIVED_AFTER, DERIVED_METRICS, METRIC_LABELS, TABLE_METRICS, case_label,
+    DERIVED_AFTER, DERIVED_METRICS, METRIC_LABELS, TABLE_METRICS, agent_label, case_label,
 )
 from agents.evaluate.settings import Evaluation
 from agents.evaluate.unforced import reference_agents
@@ -53,32 +53,64 @@ def format_cell(row: dict[str, Any] | None) -> str:
     return "n/a" if row is None else format_interval(row)
 
 
+#: The console table's width at most, in characters.
+TABLE_WIDTH = 120
+#: Short headers of the console table's columns.
+TABLE_HEADERS = {"total_reward": "total reward", "vehicles_lost": "lost", "unforced_losses":
+                 "unforced", "contacts": "contacts", "separation_losses": "sep. losses",
+                 "collisions": "unres. conflicts", "mean_delay_min": "delay (min)"}
+
+
+def _short(text: str, width: int) -> str:
+    """``text`` cut to ``width`` characters, its middle replaced by ``~`` where it is longer."""
+    if len(text) <= width:
+        return text
+    keep = width - 1
+    return text[:keep // 2] + "~" + text[len(text) - (keep - keep // 2):]
+
+
+def _mean_cell(row: dict[str, Any] | None) -> str:
+    if row is None:
+        return "n/a"
+    d = decimals((row["ci_high"] - row["ci_low"]) / 2.0, row["mean"])
+    return f"{row['mean']:.{d}f}"
+
+
 def format_table(evaluation: Evaluation) -> str:
-    """The console table: one block per case, agents as rows, ``mean [95 % CI]`` as in the
-    report."""
+    """The console table, at most :data:`TABLE_WIDTH` characters wide: one block per case,
+    agents as rows, the reward as ``mean [95 % CI]`` and the safety counts a day as means
+    (every metric with its interval is in ``summary.csv`` and the report)."""
     shown = summary_metrics(evaluation)
     metrics = [m for m in TABLE_METRICS if m in shown]
     pct = round(100 * evaluation.settings.confidence)
     blocks = []
     for config in evaluation.settings.configs:
-        rows = [[agent] + [format_cell(evaluation.stat(agent, config, m)) for m in metrics]
-                for agent in evaluation.settings.agents
-                if evaluation.stat(agent, config, metrics[0]) is not None] if metrics else []
-        if not rows:
+        agents = [a for a in evaluation.settings.agents
+                  if metrics and evaluation.stat(a, config, metrics[0]) is not None]
+        if not agents:
             continue
-        n = max(evaluation.stat(r[0], config, metrics[0])["n"] for r in rows)
-        header = ["agent"] + [METRIC_LABELS.get(m, m) for m in metrics]
-        widths = [max(len(str(line[i])) for line in [header] + rows) for i in range(len(header))]
-        title = (f"{case_label(config)}: mean [{pct} % bootstrap CI] over {n} episode"
-                 f"{'s' if n != 1 else ''}" + (" (one episode: no interval)" if n == 1 else ""))
-        lines = [title, "  ".join(h.ljust(w) if i == 0 else h.rjust(w)
-                                  for i, (h, w) in enumerate(zip(header, widths)))]
-        lines.append("  ".join("-" * w for w in widths))
-        for row in rows:
-            lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                                   for i, (c, w) in enumerate(zip(row, widths))))
-        blocks.append("\n".join(lines))
-    return "\n\n".join(blocks)
+        cells = [[format_cell(evaluation.stat(a, config, m)) if m == "total_reward"
+                  else _mean_cell(evaluation.stat(a, config, m)) for m in metrics]
+                 for a in agents]
+        header = [TABLE_HEADERS.get(m, m) for m in metrics]
+        widths = [max(len(line[i]) for line in [header, *cells]) for i in range(len(metrics))]
+        room = TABLE_WIDTH - sum(w + 2 for w in widths)
+        names = [_short(agent_label(a), max(12, room)) for a in agents]
+        first = max(len("agent"), *(len(n) for n in names))
+        n = max(evaluation.stat(a, config, metrics[0])["n"] for a in agents)
+        lines = [f"{case_label(config)}: {n} day{'s' if n != 1 else ''}; reward mean [{pct} % "
+                 f"bootstrap CI], the rest means a day"
+                 + (" (one episode: no interval)" if n == 1 else ""),
+                 "  ".join(["agent".ljust(first), *(h.rjust(w) for h, w in zip(header, widths))]),
+                 "  ".join("-" * w for w in [first, *widths])]
+        lines += ["  ".join([name.ljust(first), *(c.rjust(w) for c, w in zip(row, widths))])
+                  for name, row in zip(names, cells)]
+        blocks.append("\n".join(line[:TABLE_WIDTH] for line in lines))
+    note = ("lost: vehicles lost in the air and on the ground; unforced: lost beyond the fewest "
+            "any reference agent lost that day\nunres. conflicts: predicted conflicts left "
+            "unresolved (the paper's collisions, S = -5), not contacts\nevery metric, with its "
+            "interval: summary.csv and the report")
+    return "\n\n".join(blocks + [note]) if blocks else ""
 
 
 # ============================================================================ files

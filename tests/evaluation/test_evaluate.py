@@ -35,7 +35,8 @@ METRICS = ["steps", "total_reward", "mean_battery_pct", "good_takeoffs", "good_l
            "takeoffs", "failed_takeoffs", "landings", "mean_delay_min", "collisions",
            "avoided_conflicts", "separation_losses", "min_separation_m",
            "separation_loss_min", "trail_hold_min", "contacts", "battery_depletions",
-           "stranded_air", "stranded_ground", "stranded", "reserve_violations", "service_min_lost",
+           "stranded_air", "stranded_ground", "stranded", "vehicles_lost", "reserve_violations",
+           "service_min_lost",
            "completed_trips"]
 
 
@@ -281,7 +282,8 @@ def test_report_has_tables_and_image_links(serial_run):
     assert "## paper (case 1, no uncertainty)" in text
     assert "## paper_uncertain (case 2, with uncertainty)" in text
     assert text.count("| metric | random | FirstLegal |") == 2
-    assert "| total reward |" in text and "| collisions |" in text
+    assert "| total reward |" in text and "| unresolved conflicts |" in text
+    assert "| collisions |" not in text and "| depletions" not in text  # one label a quantity
     for name in ("case_study.png", "action_distribution.png"):
         rel = os.path.relpath(out / name, report.parent)
         assert f"]({Path(rel).as_posix()})" in text

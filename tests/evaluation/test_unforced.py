@@ -40,7 +40,7 @@ def records(agents=("random", "dispatcher", "planner"), configs=("paper", "twin"
                 air, ground = LOST[agent][config][k]
                 metrics = {"steps": 1440, "total_reward": 10.0 * k, "stranded_air": air,
                            "stranded_ground": ground, "stranded": air + ground,
-                           "service_min_lost": 0.0}
+                           "vehicles_lost": air + ground, "service_min_lost": 0.0}
                 out.append(EpisodeRecord(EpisodeTask(agent, config, k, seed), metrics))
     return out
 
@@ -93,17 +93,17 @@ def test_the_row_follows_the_vehicles_lost_and_the_table_says_n_a_where_it_has_n
     s = settings(agents=("random", "dispatcher"))
     recs = records(("random",)) + records(("dispatcher",), ("paper",))
     metrics = ["steps", "total_reward", "stranded_air", "stranded_ground", "stranded",
-               "service_min_lost"]
+               "vehicles_lost", "service_min_lost"]
     summary = with_unforced(summarize(recs, s, metrics), unforced_rows(recs, s))
     names = [(r["agent"], r["config"], r["metric"]) for r in summary]
-    at = names.index(("random", "paper", "stranded"))
+    at = names.index(("random", "paper", "vehicles_lost"))
     assert names[at + 1] == ("random", "paper", "unforced_losses")
     assert ("random", "twin", "unforced_losses") not in names
     evaluation = Evaluation(s, recs, {}, metrics, summary)
-    assert summary_metrics(evaluation) == [*metrics[:5], "unforced_losses", "service_min_lost"]
+    assert summary_metrics(evaluation) == [*metrics[:6], "unforced_losses", "service_min_lost"]
     table = format_table(evaluation)
     twin = table.split("\n\n")[1]
-    assert "unforced losses/day" in twin and "n/a" in twin.splitlines()[3]
+    assert "unforced" in twin.splitlines()[1] and "n/a" in twin.splitlines()[3]
     assert "n/a" not in table.split("\n\n")[0]
 
 
@@ -113,16 +113,16 @@ def test_the_evaluation_reports_them_and_keeps_them_out_of_the_episodes(tmp_path
             "paper", "--episodes", "2", "--set", "schedule.episode_steps=40", "--no-progress",
             "--out", str(out), "--report", str(report)]
     assert ev.main(argv) == 0
-    assert "unforced losses/day" in capsys.readouterr().out
+    assert "unforced" in capsys.readouterr().out.splitlines()[1]
     with (out / "episodes.csv").open(newline="") as fh:
         header = next(csv.reader(fh))
     assert "unforced_losses" not in header
     with (out / "summary.csv").open(newline="") as fh:
         summary = list(csv.DictReader(fh))
     metrics = [r["metric"] for r in summary if r["agent"] == "dispatcher"]
-    assert metrics[metrics.index("stranded") + 1] == "unforced_losses"
-    heuristic = [r for r in summary if r["metric"] == "unforced_losses"]
-    assert len(heuristic) == 2 and heuristic[0]["mean"] == "0.0"  # the reference itself
+    assert metrics[metrics.index("vehicles_lost") + 1] == "unforced_losses"
+    dispatcher = [r for r in summary if r["metric"] == "unforced_losses"]
+    assert len(dispatcher) == 2 and dispatcher[0]["mean"] == "0.0"  # the reference itself
     doc = json.loads((out / "results.json").read_text())
     assert doc["unforced_reference"] == ["dispatcher"]
     assert all("unforced_losses" not in e["metrics"] for e in doc["episodes"])

@@ -127,8 +127,11 @@ def test_masked_out_action_names_the_legal_set():
 def test_episode_summary_has_exactly_the_registered_metrics_in_order():
     """One source for the metric list: the summary, the evaluation's labels and the training
     logs all follow marl_vertiport.sim.metrics.METRICS (the evaluation's labels add the
-    metrics it derives across agents, never an episode's)."""
-    from agents.evaluate.metrics import DERIVED_METRICS, DIRECTION, METRIC_LABELS
+    metrics it derives across agents and the per-episode names it gives a metric of the
+    simulator, ``vehicles_lost`` for ``stranded``)."""
+    from agents.evaluate.metrics import (
+        DERIVED_METRICS, DIRECTION, EPISODE_ALIASES, METRIC_LABELS, with_aliases,
+    )
     from agents.training.curves import CURVE_KEYS
     from agents.training.vec_env import LOGGED_METRICS
     from marl_vertiport import vertiport_v1
@@ -138,9 +141,13 @@ def test_episode_summary_has_exactly_the_registered_metrics_in_order():
     env.reset(seed=0)
     summary = env.unwrapped.sim.episode_metrics()
     assert list(summary) == [*METRICS, "action_counts"]
-    assert list(METRIC_LABELS) == [*METRICS, *DERIVED_METRICS]
+    assert list(METRIC_LABELS) == [*METRICS, *EPISODE_ALIASES, *DERIVED_METRICS]
     assert not set(DERIVED_METRICS) & set(summary)
-    assert set(DIRECTION) <= set(METRICS) and all(v in (-1, 1) for v in DIRECTION.values())
+    assert set(EPISODE_ALIASES.values()) <= set(METRICS) and not set(EPISODE_ALIASES) & set(METRICS)
+    aliased = with_aliases(summary)
+    assert all(aliased[alias] == summary[of] for alias, of in EPISODE_ALIASES.items())
+    assert set(DIRECTION) <= set(METRICS) | set(EPISODE_ALIASES)
+    assert all(v in (-1, 1) for v in DIRECTION.values())
     assert LOGGED_METRICS == TRAINING_METRICS == CURVE_KEYS[-len(TRAINING_METRICS):]
     assert {"total_reward", "stranded", "collisions"} <= set(TRAINING_METRICS)
 
