@@ -117,8 +117,11 @@ safety: $(STAMP)  ## every controller but the planner on every shipped layout at
 	$(call SAFETY_SET,u05,0.05)
 	$(call SAFETY_SET,u10,0.1)
 
-render: $(STAMP)  ## write an animated GIF of one episode of AGENT (runs/render/)
-	$(CLI) render --agent $(AGENT) --config $(CONFIG) --out runs/render/$(AGENT)_$(CONFIG).gif
+# `make render` writes into runs/render/ unless OUT is given on the command line.
+RENDER_DIR = $(if $(filter command line environment,$(origin OUT)),$(OUT),runs/render)
+
+render: $(STAMP)  ## write an animated GIF of one episode of AGENT on CONFIG, with its decision log, into OUT (runs/render/)
+	$(CLI) render --agent '$(AGENT)' --config $(CONFIG) --out $(RENDER_DIR)/$(subst /,_,$(subst :,_,$(AGENT)))_$(CONFIG).gif
 
 bench: $(STAMP)  ## measure env, physics, vector, inference and training speed (docs/performance.md)
 	$(CLI) bench --out runs/bench --report docs/performance.md

@@ -20,7 +20,8 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
 
 Each command is also a module (``python -m agents.evaluate`` and so on); this entry point only
 dispatches to them, importing the one it runs. A name that changed in 0.2.0 (``heuristic``,
-``rollout``, ``handback``, ...) still works and prints one line, ``note: ...``.
+``rollout``, ``handback``, ...) still works and prints one line, ``note: ...``. Every error is
+one line, ``error: ...``; ``--debug`` anywhere on the line shows the traceback instead.
 """
 
 from __future__ import annotations
@@ -68,8 +69,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Dispatch ``argv`` (default: ``sys.argv[1:]``) to the command's module; its exit code."""
+    """Dispatch ``argv`` (default: ``sys.argv[1:]``) to the command's module; its exit code.
+
+    An error the command does not handle itself is printed as one line, ``error: ...``, and
+    exits with status 1; ``--debug`` (anywhere in ``argv``) lets it raise, with its traceback."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    argv = [a for a in argv if a != "--debug"]
     if not argv or argv[0] not in COMMANDS:
         build_parser().parse_args(argv[:1])  # prints the help, or the error, and exits
     show_notes_on_one_line()
@@ -79,7 +85,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     prog = f"{PROG} {command}"
     if command in _ENV_COMMANDS:  # one parser with the three as subcommands
         rest, prog = [command, *rest], PROG
-    code = importlib.import_module(module_name).main(rest, prog=prog)
+    try:
+        code = importlib.import_module(module_name).main(rest, prog=prog)
+    except Exception as exc:  # one line for the user; the traceback with --debug
+        if debug:
+            raise
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"error: {message} ({type(exc).__name__}; --debug shows where)", file=sys.stderr)
+        return 1
     return int(code or 0)
 
 

@@ -1,6 +1,6 @@
 """A controller of your own, run through the plain AEC loop and then through the evaluation.
 
-    python examples/custom_agent.py
+    python examples/custom_agent.py [DAYS] [OUT]     # 4 days, into runs/eval_custom by default
 """
 
 import sys
@@ -39,5 +39,7 @@ if __name__ == "__main__":
         observation, reward, termination, truncation, info = env.last()
         env.step(None if termination or truncation else agent.act(observation))
     print("one day:", {k: round(v, 1) for k, v in info["episode"].items() if k != "action_counts"})
-    sys.exit(evaluate(["--agents", "examples.custom_agent:ChargeFirst", "fcfs", "--episodes",
-                       sys.argv[1] if len(sys.argv) > 1 else "4", "--out", "runs/eval_custom"]))
+    days = sys.argv[1] if len(sys.argv) > 1 else "4"
+    out = sys.argv[2] if len(sys.argv) > 2 else "runs/eval_custom"
+    sys.exit(evaluate(["--agents", "examples.custom_agent:ChargeFirst", "fcfs", "--episodes", days,
+                       "--out", out]))

@@ -25,7 +25,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-__all__ = ["ImportTargetError", "import_target", "is_file_target"]
+__all__ = ["ImportTargetError", "import_target", "is_file_target", "target_file"]
 
 #: How a target looks, for error messages.
 FORMS = "'package.module:Class' or 'path/to/file.py:Class'"
@@ -64,6 +64,26 @@ def import_target(target: str) -> Any:
             owner = where if depth == 0 else f"{where}: {'.'.join(attr_path.split('.')[:depth])}"
             raise ImportTargetError(f"{owner} has no attribute {part!r}{_suggest(part, obj)}") from None
     return obj
+
+
+def target_file(target: str) -> Path | None:
+    """The source file of the module or file ``target`` (``module:Attr`` or ``file.py:Attr``)
+    names, resolved from the working directory as :func:`import_target` resolves it, without
+    importing it; ``None`` where there is none (a built-in module, no such module or file)."""
+    source, sep, _ = target.rpartition(":")
+    if not sep or not source:
+        return None
+    if is_file_target(source):
+        path = Path(source).expanduser()
+        path = path if path.is_absolute() else Path(os.getcwd()) / path
+        return path.resolve() if path.is_file() else None
+    _working_directory_on_path()
+    try:
+        spec = importlib.util.find_spec(source)
+    except (ImportError, ValueError):
+        return None
+    origin = getattr(spec, "origin", None)
+    return Path(origin).resolve() if origin and Path(origin).is_file() else None
 
 
 def _suggest(name: str, obj: Any) -> str:

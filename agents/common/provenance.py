@@ -7,7 +7,12 @@ shipped checkpoint and the committed code (``tests/tools/test_shipped_results.py
 
     {"code": {"commit": "3f2c...", "dirty": false}, "env": {"rules": 1},
      "checkpoints": {"gcn": {"path": "agents/checkpoints/gcn_default.pt", "sha256": "9a1e..."}},
-     "machine": {"cpu": "AMD EPYC ...", "cores": 2, "python": "3.11.7", "platform": "Linux-..."}}
+     "machine": {"cpu": "AMD EPYC ...", "cores": 2, "python": "3.11.7", "platform": "Linux-..."},
+     "controllers": {"mine.py:Ctrl": {"target": "mine.py:Ctrl", "file": "/home/.../mine.py",
+                                      "sha256": "77b0..."}}}
+
+``controllers`` is there only where an agent is named by an import path: the file its class is
+in, so that the run's controllers can be rebuilt from another folder.
 
 ``dirty`` is true when a file of the code (anything tracked or untracked outside ``docs/``, the
 folder results are written to) differs from the commit; ``commit`` is null outside a git
@@ -95,9 +100,31 @@ def machine() -> dict[str, Any]:
             "python": platform.python_version(), "platform": platform.platform()}
 
 
+def controller_files(agents: Iterable[str]) -> dict[str, dict[str, str]]:
+    """Per agent named by an import path (``module:Class``, ``path/to/file.py:Class``, with
+    arguments or not), the absolute path and SHA-256 of the file its class is in: what rebuilds
+    the controller from another folder (``marl-vertiport worst-day``) and tells whether the file
+    changed since."""
+    from agents.common.imports import target_file
+    from agents.common.specs import AgentSpecError, split_spec
+
+    out: dict[str, dict[str, str]] = {}
+    for spec in agents:
+        try:
+            target, _ = split_spec(spec)
+        except AgentSpecError:
+            continue
+        path = target_file(target) if ":" in target else None
+        if path is not None:
+            out[spec] = {"target": target, "file": str(path), "sha256": file_sha256(path)}
+    return out
+
+
 def provenance(agents: Iterable[str] = ()) -> dict[str, Any]:
     """The record of module docstring for a result that ``agents`` played: per agent that
-    plays checkpoints, each file's path and SHA-256 (a list for an ensemble)."""
+    plays checkpoints, each file's path and SHA-256 (a list for an ensemble); per agent named
+    by an import path, its file (:func:`controller_files`)."""
+    agents = list(agents)
     checkpoints: dict[str, Any] = {}
     for spec in agents:
         files = checkpoint_files(spec)
@@ -108,8 +135,12 @@ def provenance(agents: Iterable[str] = ()) -> dict[str, Any]:
         checkpoints[spec] = entries[0] if len(entries) == 1 else entries
     from marl_vertiport.config import LATEST_RULES
 
-    return {"code": code_version(), "env": {"rules": LATEST_RULES}, "checkpoints": checkpoints,
-            "machine": machine()}
+    record = {"code": code_version(), "env": {"rules": LATEST_RULES}, "checkpoints": checkpoints,
+              "machine": machine()}
+    controllers = controller_files(agents)
+    if controllers:
+        record["controllers"] = controllers
+    return record
 
 
 def describe(record: dict[str, Any]) -> str:

@@ -69,9 +69,11 @@ def lowest_reward_window(rows: list[dict[str, Any]], steps: int) -> int:
 
 def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
            before_min: float, after_min: float, window_min: float, size: tuple[int, int],
-           progress: bool) -> dict[str, Any]:
-    """Play ``pick``'s day whole with its log, then render its window; the index's row."""
-    policy = make_controller(pick.agent)
+           progress: bool, spec: str | None = None) -> dict[str, Any]:
+    """Play ``pick``'s day whole with its log, then render its window; the index's row.
+    ``spec`` builds the controller (default: ``pick.agent``; :func:`rebuildable`)."""
+    spec = pick.agent if spec is None else spec
+    policy = make_controller(spec)
     env = versioned_env(pick.config, overrides, rules)
     log = DecisionLog(policy)
     try:
@@ -99,7 +101,7 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
     try:
         colours = [rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)])
                    for i in range(env.unwrapped.sim.n)]
-        player = make_controller(pick.agent)  # a fresh controller: the day played again
+        player = make_controller(spec)  # a fresh controller: the day played again
         frames = record_episode(
             env, player, pick.seed, lambda s: FrameComposer(s, size[0], size[1]), start,
             n_steps, 1, progress=progress, convert=GifQuantiser(colours),
@@ -159,13 +161,41 @@ def main(argv: list[str] | None = None, prog: str = PROG) -> int:
     return run_cli(build_parser(prog), _run, argv)
 
 
+def rebuildable(spec: str, record: dict[str, Any]) -> str:
+    """``spec`` as it builds from here: itself where it does, else (an import path that does
+    not resolve from this folder) the same class from the file the run's record names
+    (``provenance.controllers``), if that file is still what the run played (its SHA-256)."""
+    from agents.common.provenance import file_sha256
+    from agents.common.specs import AgentSpecError, split_spec
+    from agents.controllers.registry import make_controller
+
+    try:
+        make_controller(spec)
+        return spec
+    except AgentSpecError as exc:
+        entry = (record.get("controllers") or {}).get(spec)
+        if not entry:
+            raise RenderError(f"{exc} (and the run's record names no file for it)") from None
+    path = Path(entry["file"])
+    if not path.is_file():
+        raise RenderError(f"agent {spec!r}: not found from here, and the file the run played, "
+                          f"{path}, is gone") from None
+    if file_sha256(path) != entry["sha256"]:
+        raise RenderError(f"agent {spec!r}: {path} changed since the run (SHA-256 "
+                          f"{entry['sha256'][:16]} then): replaying it would not be the run")
+    _, sep, args = spec.partition("[")
+    attr = split_spec(spec)[0].rpartition(":")[2]
+    return f"{path}:{attr}" + (f"[{args}" if sep else "")
+
+
 def _read_run(run: Path) -> tuple[dict[str, Any], list[dict[str, str]]]:
-    """An evaluation's settings (``results.json``) and its episodes (``episodes.csv``, which
-    holds every scalar metric), agents named as now; a missing or broken file is a
-    :class:`RenderError` naming it."""
+    """An evaluation's settings (``results.json``, with its provenance record) and its episodes
+    (``episodes.csv``, which holds every scalar metric), agents named as now; a missing or
+    broken file is a :class:`RenderError` naming it."""
     path = run / "results.json"
     try:
-        settings = json.loads(path.read_text())["settings"]
+        doc = json.loads(path.read_text())
+        settings = {**doc["settings"], "provenance": doc.get("provenance") or {}}
     except FileNotFoundError:
         raise RenderError(f"{path} not found: give an evaluation's output folder") from None
     except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError) as exc:
@@ -201,7 +231,8 @@ def _run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         row = replay(pick, overrides, rules, out, before_min=args.before_min,
                      after_min=args.after_min, window_min=args.window_min, size=size,
-                     progress=not args.no_progress)
+                     progress=not args.no_progress,
+                     spec=rebuildable(pick.agent, settings["provenance"]))
         note = "" if row["matched"] else " (the replay's reward differs from the run's: another code or machine)"
         print(f"    wrote {out / row['video']} and its decision log, {time.perf_counter() - t0:.0f} s{note}",
               file=sys.stderr)
