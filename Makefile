@@ -103,6 +103,7 @@ results: $(STAMP)  ## regenerate every shipped result of the shipped policy but 
 	$(CLI) evaluate --suite transfer --out docs/results/transfer --report docs/results/transfer.md $(RUN_ON)
 	$(CLI) evaluate --suite scaling --out docs/results/scaling --report docs/results/scaling.md $(RUN_ON)
 	$(CLI) sweep wind --out docs/results/sweeps/wind $(RUN_ON)
+	$(CLI) paper-claims --out docs/results/paper_claims.md > /dev/null
 
 bar: $(STAMP)  ## the learned ATC against the bar: lookahead on the first $(BAR_DAYS) of docs/results.md's test days per case (docs/results/bar.md), paired day by day with the dispatcher, gcn and the planner, unforced losses against the dispatcher and the planner (docs/results/bar_paired.md; 55 minutes on a 2-core Intel Xeon)
 	$(CLI) evaluate --agents lookahead --configs paper paper_uncertain paper_uncertain_10 --episodes $(BAR_DAYS) --out docs/results/bar --report docs/results/bar.md $(RUN_ON)

@@ -13,6 +13,7 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     bench         the speed and memory benchmark (docs/performance.md)
     capacity      whether each vertiport carries its fleet, from its config alone
     charger-study where the charging ports' minutes go on simulated days, vehicles lost
+    paper-claims  the paper's case-study claims beside this project's measurements
     soak          many days with every uncertainty high: invariants after every step, memory
     demo          random legal actions for a few episodes, with steps per second
     info          spaces, feature columns and action names of an env config
@@ -46,6 +47,7 @@ COMMANDS = {
     "check-results": ("agents.checks.results", "shipped results: their record and their first days replayed"),
     "capacity": ("agents.studies.capacity", "whether a vertiport carries its fleet, from its config"),
     "charger-study": ("agents.studies.charger_study", "where the charging ports' minutes go, simulated"),
+    "paper-claims": ("agents.studies.paper_claims", "the paper's case-study claims, measured here"),
     "soak": ("agents.studies.soak", "many days with high uncertainty: invariants and memory"),
     "demo": ("marl_vertiport.cli", "random legal actions for a few episodes"),
     "info": ("marl_vertiport.cli", "spaces, features and action names of a config"),
