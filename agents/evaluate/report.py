@@ -21,6 +21,7 @@ from agents.evaluate.tables import (
     summary_metrics,
 )
 from agents.evaluate.figures import action_distribution_figure, case_study_figure
+from agents.evaluate.interchange import marl_eval_json
 
 # ============================================================================ report
 
@@ -218,6 +219,7 @@ def write_outputs(evaluation: Evaluation, out: Path, command: str,
     put("episodes.csv", episodes_csv(evaluation))
     put("summary.csv", summary_csv(evaluation))
     if evaluation.complete:
+        put("marl_eval.json", marl_eval_json(evaluation))
         figures = {"case_study": out / "case_study.png",
                    "action_distribution": out / "action_distribution.png"}
         put(figures["case_study"], case_study_figure(evaluation))
