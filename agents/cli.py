@@ -10,6 +10,7 @@ Commands (``marl-vertiport COMMAND --help`` for each one's options):
     curves        learning curves over training seeds, with intervals and baselines
     render        an animated GIF or MP4 of one episode of a controller, with its decisions
     worst-day     each controller's worst day of an evaluation, rendered with its decision log
+    timeline      one day at a glance: batteries, statuses, delays, chargers, losses, failures
     bench         the speed and memory benchmark (docs/performance.md)
     capacity      whether each vertiport carries its fleet, from its config alone
     charger-study where the charging ports' minutes go on simulated days, vehicles lost
@@ -42,6 +43,7 @@ COMMANDS = {
     "curves": ("agents.curves.cli", "learning curves over training seeds"),
     "render": ("agents.render.cli", "an animated GIF or MP4 of one episode"),
     "worst-day": ("agents.render.worst_day", "each controller's worst day of an evaluation, rendered"),
+    "timeline": ("agents.render.timeline", "one day at a glance, as a figure"),
     "bench": ("agents.bench.cli", "the speed and memory benchmark"),
     "check-train": ("agents.checks.train", "a fresh training run against the shipped checkpoint"),
     "check-results": ("agents.checks.results", "shipped results: their record and their first days replayed"),

@@ -150,11 +150,12 @@ class DecisionLog:
         """The last row logged (the decision of the step just taken), or ``None``."""
         return self.rows[-1] if self.rows else None
 
-    def to_csv(self) -> str:
+    def to_csv(self, rows: list[dict[str, Any]] | None = None) -> str:
+        """``rows`` (default: every turn logged) as CSV, one line a turn."""
         buf = io.StringIO()
         writer = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
         writer.writeheader()
-        for row in self.rows:
+        for row in self.rows if rows is None else rows:
             flat = dict(row)
             flat["probabilities"] = "; ".join(f"{k} {p:.4f}" for k, p in row["probabilities"].items())
             flat["masked"] = "; ".join(f"{k}: {r}" for k, r in row["masked"].items())
@@ -162,12 +163,21 @@ class DecisionLog:
             writer.writerow(flat)
         return buf.getvalue()
 
-    def write(self, stem: str | Path, meta: dict[str, Any] | None = None) -> tuple[Path, Path]:
-        """Write ``<stem>.csv`` and ``<stem>.json`` (the rows, and ``meta`` beside them), each
-        atomically; returns the two paths."""
+    def choices(self) -> list[dict[str, Any]]:
+        """The real decisions: the rows whose vehicle had more than one legal action (a turn
+        with one legal action decides nothing)."""
+        return [row for row in self.rows if row["legal"] > 1]
+
+    def write(self, stem: str | Path, meta: dict[str, Any] | None = None
+              ) -> tuple[Path, Path, Path]:
+        """Write ``<stem>.csv`` and ``<stem>.json`` (every turn, and ``meta`` beside them), and
+        ``<stem>.choices.csv`` (the real decisions only, :meth:`choices`), each atomically;
+        returns the three paths."""
         stem = Path(stem)
         csv_path, json_path = stem.with_name(stem.name + ".csv"), stem.with_name(stem.name + ".json")
+        choices_path = stem.with_name(stem.name + ".choices.csv")
         write_atomic(csv_path, self.to_csv())
+        write_atomic(choices_path, self.to_csv(self.choices()))
         write_atomic(json_path, json.dumps({"meta": meta or {}, "columns": list(COLUMNS),
                                             "rows": self.rows}, indent=1))
-        return csv_path, json_path
+        return csv_path, json_path, choices_path

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 
+from agents.common.files import write_atomic
 from agents.common.seeds import EVAL_SEEDS
 from agents.controllers.decisions import DecisionLog
 from agents.controllers.registry import AgentSpecError, agent_help, make_controller
@@ -39,6 +40,7 @@ from marl_vertiport.sim.physics import VEHICLE_COLOURS
 from agents.render.camera import DEFAULT_PITCH_DEG, DEFAULT_YAW_DEG
 from agents.render.frames import FrameComposer
 from agents.render.style import rgb
+from agents.render.timeline import TimelineRecorder, timeline_png
 from agents.render.video import (
     GifQuantiser, RenderError, _mp4_backend, record_episode, run_cli, write_video,
 )
@@ -199,9 +201,11 @@ def _run(args: argparse.Namespace) -> int:
         colours = [rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)]) for i in range(sim.n)]
         convert = GifQuantiser(colours) if out.suffix.lower() == ".gif" else None
         log = None if args.no_decisions else DecisionLog(policy)
+        timeline = TimelineRecorder()
         t0 = time.perf_counter()
         frames = record_episode(env, policy, args.seed, factory, start_step, n_steps, args.every,
-                                progress=not args.no_progress, convert=convert, log=log)
+                                progress=not args.no_progress, convert=convert, log=log,
+                                after_step=timeline.after_step)
     finally:
         env.close()
     write_video(frames, out, args.fps, colours)
@@ -212,7 +216,12 @@ def _run(args: argparse.Namespace) -> int:
         paths = log.write(decision_log_stem(out), {
             "agent": args.agent, "config": str(args.config), "seed": args.seed,
             "video": out.name, "first_frame_step": start_step})
-        print(f"wrote {paths[0]} and {paths[1].name} ({len(log.rows)} turns)", file=sys.stderr)
+        print(f"wrote {paths[0]}, {paths[1].name} and {paths[2].name} ({len(log.rows)} turns, "
+              f"{len(log.choices())} with a choice)", file=sys.stderr)
+    png = out.with_name(out.stem + ".timeline.png")
+    write_atomic(png, timeline_png(timeline, f"{args.agent} on {args.config}, day {args.seed}, "
+                                             f"to minute {timeline.minute[-1]:.0f}", [args.agent]))
+    print(f"wrote {png}", file=sys.stderr)
     return 0
 
 

@@ -49,7 +49,7 @@ class FrameComposer:
         for _ in range(20):
             lh = math.ceil(body * 1.25)
             header_h = pad + clock_h + 2 * max(2, int(3 * s)) + max(2, int(4 * s)) + 3 * lh + pad
-            footer_h = 3 * math.ceil(body * 0.88 * 1.25) + 2 * pad
+            footer_h = 4 * math.ceil(body * 0.88 * 1.25) + 2 * pad
             row_h = (self.height - header_h - footer_h) / max(sim.n, 1)
             if row_h >= 4.2 * lh or body <= 7.0:
                 break
@@ -150,6 +150,7 @@ class FrameComposer:
                 d.text((x, y + 1), node_short(sim, k), font=self.f_port, fill=(40, 40, 50),
                        anchor="mt")
         self._draw_scene_key(d)
+        self._draw_failed_chargers(d)
         pos = np.asarray(sim.pos, dtype=float)
         ground = pos.copy()
         ground[:, 2] = 0.0
@@ -191,7 +192,7 @@ class FrameComposer:
             # A ring in the body colour makes the small bodies easy to find.
             rr = max(4.0, 9.0 * s)
             d.ellipse([x - rr, y - rr * 0.8, x + rr, y + rr * 0.8], outline=col, width=lw)
-            if status == OUT_OF_SERVICE:
+            if status == OUT_OF_SERVICE or bool(sim.lost[v]):
                 c = 5 * s
                 d.line([(x - c, y - c), (x + c, y + c)], fill=RED, width=lw)
                 d.line([(x - c, y + c), (x + c, y - c)], fill=RED, width=lw)
@@ -199,7 +200,7 @@ class FrameComposer:
             if bool(sim.conflict[v]):
                 text += " !"
             outline = (20, 20, 20)
-            if status == OUT_OF_SERVICE or bool(sim.conflict[v]):
+            if status == OUT_OF_SERVICE or bool(sim.lost[v]) or bool(sim.conflict[v]):
                 outline = RED
             if v == self._acting:
                 outline = (255, 255, 255)
@@ -227,11 +228,28 @@ class FrameComposer:
             d.rectangle(box, fill=col, outline=outline, width=max(1, int(round(1.5 * s))))
             d.text(at, text, font=self.f_label, fill=ink_on(col), anchor=anchor)
 
+    def _draw_failed_chargers(self, d: ImageDraw.ImageDraw) -> None:
+        """A red ring and cross on each charging port whose charger failed in the last step."""
+        s = self.s
+        for k in getattr(self.sim, "last_failed_chargers", ()):
+            x, y = self._port_px[k]
+            if not (np.isfinite(x) and np.isfinite(y)):
+                continue
+            r, lw = 9 * s, max(1, int(round(2 * s)))
+            d.ellipse([x - r, y - r * 0.7, x + r, y + r * 0.7], outline=RED, width=lw)
+            d.line([(x - r * 0.6, y - r * 0.4), (x + r * 0.6, y + r * 0.4)], fill=RED, width=lw)
+            d.line([(x - r * 0.6, y + r * 0.4), (x + r * 0.6, y - r * 0.4)], fill=RED, width=lw)
+
     def _draw_scene_key(self, d: ImageDraw.ImageDraw) -> None:
-        """A small key of the ground markings in the bottom-left corner of the 3-D view."""
+        """The key of the view in its bottom-left corner: the ground markings, and what every
+        tag and mark on a vehicle means."""
         s = self.s
         items = [((62, 62, 74), "P port"), ((30, 160, 65), "C charger"), ((235, 200, 50), "H hover spot"),
-                 ((75, 75, 220), "airspace edge")]
+                 ((75, 75, 220), "airspace edge"), (RED, "red ring x: charger failed"),
+                 ((200, 200, 200), "tag '2 4m': eVTOL 2, 4 m up"),
+                 ((245, 245, 245), "tag '2 +11m': 11 m beyond the edge"),
+                 ((255, 255, 255), "white edge: acting; '!': conflict"),
+                 (RED, "red x / red edge: vehicle lost")]
         x, y = max(3, int(5 * s)), self.height - max(3, int(5 * s))
         step = int(math.ceil(self.f_port.size * 1.3)) if hasattr(self.f_port, "size") else 12
         r = max(2, int(3 * s))

@@ -30,6 +30,8 @@ class StatusPanel:
 
     def _schedule_text(self, v: int) -> tuple[str, tuple[int, int, int]]:
         sim = self.sim
+        if bool(sim.lost[v]):
+            return "vehicle lost for the rest of the day", RED
         kind = int(sim.pending_kind[v])
         tol = sim.cfg.schedule.on_time_tolerance_min
         now = float(sim.minute)
@@ -110,8 +112,12 @@ class StatusPanel:
             (f"total reward {m.total_reward:+.1f}", TEXT),
             (f"good take-offs {m.good_takeoffs}/{m.takeoffs} \u00b7 landings "
              f"{m.good_landings}/{m.landings}", TEXT),
-            (f"collisions {m.collisions} \u00b7 avoided {m.avoided_conflicts} \u00b7 sep. losses "
-             f"{m.separation_losses}", RED if m.collisions or m.separation_losses else TEXT),
+            (f"vehicles lost {m.stranded_air + m.stranded_ground} \u00b7 contacts {m.contacts} "
+             f"\u00b7 sep. losses {m.separation_losses}",
+             RED if m.stranded_air + m.stranded_ground or m.contacts or m.separation_losses
+             else TEXT),
+            (f"unresolved conflicts {m.collisions} \u00b7 avoided {m.avoided_conflicts}",
+             AMBER if m.collisions else TEXT),
         ]
         sl = self.small_h
         for text, colour in lines:
@@ -157,8 +163,11 @@ class StatusPanel:
             where = f" {node_short(sim, node)}"
         elif node >= 0 and status in (TAXIING, ARRIVING):
             where = f" \u2192{node_short(sim, node)}"
-        d.text((right, y), STATUS_LABEL[status] + where, font=self.f_body,
-               fill=STATUS_COLOUR[status], anchor="ra")
+        label, colour = STATUS_LABEL[status] + where, STATUS_COLOUR[status]
+        if bool(sim.lost[v]):  # lost on the ground keeps its port: say it is lost
+            label, colour = "LOST" + (f" ({STATUS_LABEL[status]}{where})"
+                                      if status != OUT_OF_SERVICE else ""), RED
+        d.text((right, y), label, font=self.f_body, fill=colour, anchor="ra")
         if v == self._acting:
             d.text((nb[2] + 3, y), "\u25c0", font=self.f_body, fill=TEXT)
         y += lh

@@ -43,10 +43,12 @@ class _Done(Exception):
 def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[[VertiportSim], FrameComposer],
                    start_step: int, n_steps: int, every: int, progress: bool = True,
                    convert: Callable[[Image.Image], Any] | None = None,
-                   log: DecisionLog | None = None) -> list[Any]:
+                   log: DecisionLog | None = None,
+                   after_step: Callable[[str, int, Any], None] | None = None) -> list[Any]:
     """Run the episode with ``run_episode`` (as evaluation does), fast-forward
-    ``start_step`` steps without rendering, then compose a frame after every ``every``-th of
-    the next ``n_steps`` steps; the episode stops after the last frame.
+    ``start_step`` steps without rendering (with a progress bar of its own), then compose a
+    frame after every ``every``-th of the next ``n_steps`` steps; the episode stops after the
+    last frame. ``after_step`` is called after every step too (a timeline's recorder).
 
     Args:
         composer_factory: builds the :class:`FrameComposer` from the simulator.
@@ -60,15 +62,29 @@ def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[
     """
     frames: list[Any] = []
     n_frames = len(range(0, n_steps, every))
-    state: dict[str, Any] = {"composer": None, "bar": None}
+    state: dict[str, Any] = {"composer": None, "bar": None, "ff": None}
     last = start_step + (n_frames - 1) * every
 
     def on_step(agent: str, action: int, env_: Any) -> None:
         if log is not None:
             log.after_step(agent, action, env_)
+        if after_step is not None:
+            after_step(agent, action, env_)
         sim = env_.unwrapped.sim
         k = sim.step_count - 1  # index of the step just taken
-        if k < start_step or (k - start_step) % every:
+        if k < start_step:
+            if progress and state["ff"] is None:
+                from tqdm import tqdm
+
+                state["ff"] = tqdm(total=start_step, unit="step", desc="fast-forward",
+                                   file=sys.stderr, leave=False)
+            if state["ff"] is not None:
+                state["ff"].update(1)
+            return
+        if state["ff"] is not None:
+            state["ff"].close()
+            state["ff"] = None
+        if (k - start_step) % every:
             return
         if state["composer"] is None:
             state["composer"] = composer_factory(sim)
@@ -92,8 +108,9 @@ def record_episode(env: Any, policy: Any, seed: int, composer_factory: Callable[
     except _Done:
         pass
     finally:
-        if state["bar"] is not None:
-            state["bar"].close()
+        for bar in (state["ff"], state["bar"]):
+            if bar is not None:
+                bar.close()
     return frames
 
 

@@ -40,6 +40,7 @@ from agents.evaluate.episodes import versioned_env
 from agents.evaluate.worst import WorstDay, worst_days
 from agents.render.frames import FrameComposer
 from agents.render.style import rgb
+from agents.render.timeline import TimelineRecorder, chain, timeline_png
 from agents.render.cli import parse_size
 from agents.render.video import GifQuantiser, RenderError, record_episode, run_cli, write_video
 from marl_vertiport.config import LATEST_RULES
@@ -75,10 +76,10 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
     spec = pick.agent if spec is None else spec
     policy = make_controller(spec)
     env = versioned_env(pick.config, overrides, rules)
-    log = DecisionLog(policy)
+    log, timeline = DecisionLog(policy), TimelineRecorder()
     try:
         metrics = run_episode(env, policy, pick.seed, before_step=log.before_step,
-                              after_step=log.after_step)
+                              after_step=chain(log.after_step, timeline.after_step))
         mps = env.unwrapped.sim.minutes_per_step
         total_steps = env.unwrapped.sim.cfg.schedule.episode_steps
     finally:
@@ -93,6 +94,9 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
         start = lowest_reward_window(log.rows, n_steps)
     stem = f"{pick.agent}_{pick.config}".replace(":", "_").replace("/", "_").replace(".", "_")
     video = out / f"{stem}.gif"
+    write_atomic(out / f"{stem}.timeline.png", timeline_png(
+        timeline, f"{pick.agent} on {pick.config}, day {pick.seed} ({pick.reason})",
+        [pick.agent]))
     log.write(out / f"{stem}.decisions", {
         "agent": pick.agent, "config": pick.config, "seed": pick.seed, "reason": pick.reason,
         "overrides": overrides, "rules": rules, "video": video.name,
@@ -112,7 +116,7 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
     return {"pick": pick, "event_minute": None if event is None else event * mps,
             "window": (start * mps, (start + n_steps) * mps), "matched": matched,
             "replayed_reward": metrics["total_reward"], "video": video.name,
-            "log": f"{stem}.decisions.csv"}
+            "log": f"{stem}.decisions.csv", "timeline": f"{stem}.timeline.png"}
 
 
 def index_markdown(run: Path, rows: list[dict[str, Any]]) -> str:
@@ -122,10 +126,12 @@ def index_markdown(run: Path, rows: list[dict[str, Any]]) -> str:
              "first day with a vehicle lost or a contact, else its day of lowest reward "
              "(agents/evaluate/worst.py), rendered around the first loss or contact (else its "
              "window of lowest reward) with each turn's decision on the frames; the day's "
-             "decision log beside each video (`.decisions.csv`, `.json`).", "",
+             "decision log beside each video (`.decisions.csv`, `.json`; the turns with a choice "
+             "alone in `.decisions.choices.csv`) and the whole day at a glance "
+             "(`.timeline.png`).", "",
              "| agent | config | day (seed) | why | event at minute | window (minutes) | reward | "
-             "lost | contacts | replay matches the run | video | decision log |",
-             "|---|---|---:|---|---:|---|---:|---:|---:|---|---|---|"]
+             "lost | contacts | replay matches the run | video | decision log | timeline |",
+             "|---|---|---:|---|---:|---|---:|---:|---:|---|---|---|---|"]
     for r in rows:
         p = r["pick"]
         event = "" if r["event_minute"] is None else f"{r['event_minute']:g}"
@@ -133,7 +139,8 @@ def index_markdown(run: Path, rows: list[dict[str, Any]]) -> str:
                      f"{r['window'][0]:g}-{r['window'][1]:g} | {p.total_reward:.1f} | "
                      f"{p.vehicles_lost} | {p.contacts} | "
                      f"{'yes' if r['matched'] else 'NO: ' + format(r['replayed_reward'], '.1f')} | "
-                     f"[{r['video']}]({r['video']}) | [{r['log']}]({r['log']}) |")
+                     f"[{r['video']}]({r['video']}) | [{r['log']}]({r['log']}) | "
+                     f"[{r['timeline']}]({r['timeline']}) |")
     return "\n".join(lines) + "\n"
 
 

@@ -259,6 +259,9 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         self._evtol_cache: np.ndarray | None = None
         self._port_cache: np.ndarray | None = None
         self.last_info: dict[str, Any] = {}
+        #: The charging nodes whose charger failed in the last step (for the renderer; the
+        #: step's info counts them as ``charger_failures``).
+        self.last_failed_chargers: tuple[int, ...] = ()
 
     # ================================================================== snapshots
     def snapshot(self) -> dict[str, Any]:
@@ -389,6 +392,7 @@ class VertiportSim(Legality, Clearance, Avoidance, Trailing, Lifecycle, Motion, 
         failed_nodes = self.uncertainty.failed_chargers(
             rng, self._charging_node_list, None if draws is None else draws.charger_u)
         info["charger_failures"] = len(failed_nodes)
+        self.last_failed_chargers = tuple(int(k) for k in failed_nodes)
         lost_before = self.metrics.stranded_air + self.metrics.stranded_ground
         info["battery_depletions"] = self._update_battery(status_during, failed_nodes)
         info["stranded_ground"] = self._mark_stranded_on_ground()

@@ -76,7 +76,7 @@ def test_the_vehicles_lost_are_named_on_the_step_they_are_lost():
 
 def test_files_are_written_whole_with_the_same_rows(tmp_path):
     _, log, _ = _day("gcn", "paper", 1000001, steps=50)
-    csv_path, json_path = log.write(tmp_path / "day", {"agent": "gcn"})
+    csv_path, json_path, choices_path = log.write(tmp_path / "day", {"agent": "gcn"})
     with open(csv_path, newline="") as f:
         rows = list(csv.DictReader(f))
     doc = json.loads(json_path.read_text())
@@ -86,7 +86,12 @@ def test_files_are_written_whole_with_the_same_rows(tmp_path):
         assert int(flat["recommendation"]) == nested["recommendation"]
         assert flat["probabilities"].split(";")[0].split()[0] == next(iter(nested["probabilities"]))
         assert len(flat["masked"].split("; ")) == len(nested["masked"])
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["day.csv", "day.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["day.choices.csv", "day.csv", "day.json"]
+    with open(choices_path, newline="") as f:
+        choices = list(csv.DictReader(f))
+    # The real decisions alone: every turn with more than one legal action, none without.
+    assert [r["step"] for r in choices] == [r["step"] for r in rows if int(r["legal"]) > 1]
+    assert 0 < len(choices) < len(rows)
 
 
 def test_rules_have_no_probabilities_and_events_read_as_words():

@@ -53,9 +53,11 @@ def test_cli_writes_gif_with_expected_frames_and_size(tmp_path, capsys):
     assert im.info.get("duration") == 200
     assert all(np.asarray(f).std() > 10 for f in frames)  # not blank
     assert not any(frames[0].tobytes() == f.tobytes() for f in frames[1:])  # the clock moves
-    # The video and its decision log, no temp file left.
+    # The video, its decision log (every turn, and the turns with a choice), the timeline of
+    # the day so far; no temp file left.
     assert sorted(p.name for p in out.parent.iterdir()) == [
-        "tiny.decisions.csv", "tiny.decisions.json", "tiny.gif"]
+        "tiny.decisions.choices.csv", "tiny.decisions.csv", "tiny.decisions.json", "tiny.gif",
+        "tiny.timeline.png"]
     assert "wrote" in capsys.readouterr().err
     log = json.loads((out.parent / "tiny.decisions.json").read_text())
     assert log["meta"]["video"] == "tiny.gif" and len(log["rows"]) == 6
@@ -65,7 +67,7 @@ def test_no_decisions_leaves_the_video_alone(tmp_path):
     out = tmp_path / "plain.gif"
     assert render.main(["--agent", "random", "--minutes", "2", "--size", "320x240",
                         "--out", str(out), "--no-progress", "--no-decisions"]) == 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["plain.gif"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plain.gif", "plain.timeline.png"]
 
 
 def test_the_decision_strip_shows_recommendation_probabilities_and_masked_reasons(env):
@@ -255,3 +257,27 @@ def test_rendering_does_not_change_the_episode():
     assert a[1] == b[1]
     np.testing.assert_array_equal(a[2], b[2])
     np.testing.assert_array_equal(a[3], b[3])
+
+
+def test_a_lost_vehicle_and_a_failed_charger_are_drawn(env):
+    """A vehicle lost on the ground keeps its port, and the panel says it is lost; a charger
+    that failed in the step is drawn as failed; the key explains the tags."""
+    from agents.render.panel import StatusPanel
+    from agents.render.style import RED
+    from marl_vertiport.sim.layout import CHARGING_PORT
+
+    sim = _advance(env, 25)
+    comp = render.FrameComposer(sim, 640, 480)
+    before = np.asarray(comp.compose(step_reward=0.0))
+    sim.lost[0] = True
+    text, colour = StatusPanel(comp)._schedule_text(0)
+    assert "lost" in text and colour == RED
+    charger = int(np.flatnonzero(sim.layout.node_type == CHARGING_PORT)[0])
+    sim.last_failed_chargers = (charger,)
+    after = np.asarray(comp.compose(step_reward=0.0))
+    x, y = (int(round(c)) for c in comp._port_px[charger])
+    near = (slice(max(0, y - 12), y + 12), slice(max(0, x - 14), x + 14))
+    red = (np.abs(after[near].astype(int) - np.array(RED)).sum(axis=2) < 60).sum()
+    red_before = (np.abs(before[near].astype(int) - np.array(RED)).sum(axis=2) < 60).sum()
+    assert red > red_before + 10  # the ring and cross on the failed charger
+    assert (after[:, comp.view_w:] != before[:, comp.view_w:]).any()  # the panel changed too
