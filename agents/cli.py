@@ -24,16 +24,21 @@ Each command is also a module (``python -m agents.evaluate`` and so on); this en
 dispatches to them, importing the one it runs. A name that changed in 0.2.0 (``heuristic``,
 ``rollout``, ``handback``, ...) still works and prints one line, ``note: ...``. Every error is
 one line, ``error: ...``; ``--debug`` anywhere on the line shows the traceback instead.
+``--trust`` anywhere on the line lets policy files of other libraries that only load by
+unpickling be unpickled (which runs the code in them; under ``python -m``, set
+``MARL_VERTIPORT_TRUST_FILES=1`` instead); without it they are refused, named.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
 from agents.common.names import show_notes_on_one_line
+from agents.common.specs import TRUST_VARIABLE
 
 #: Command -> (module whose ``main(argv)`` runs it, one-line help).
 COMMANDS = {
@@ -76,10 +81,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Dispatch ``argv`` (default: ``sys.argv[1:]``) to the command's module; its exit code.
 
     An error the command does not handle itself is printed as one line, ``error: ...``, and
-    exits with status 1; ``--debug`` (anywhere in ``argv``) lets it raise, with its traceback."""
+    exits with status 1; ``--debug`` (anywhere in ``argv``) lets it raise, with its traceback.
+    ``--trust`` (anywhere) sets :data:`agents.common.specs.TRUST_VARIABLE` for the command and
+    the worker processes it starts."""
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
-    argv = [a for a in argv if a != "--debug"]
+    if "--trust" in argv:
+        os.environ[TRUST_VARIABLE] = "1"
+    argv = [a for a in argv if a not in ("--debug", "--trust")]
     if not argv or argv[0] not in COMMANDS:
         build_parser().parse_args(argv[:1])  # prints the help, or the error, and exits
     show_notes_on_one_line()

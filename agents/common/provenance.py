@@ -11,8 +11,10 @@ shipped checkpoint and the committed code (``tests/tools/test_shipped_results.py
      "controllers": {"mine.py:Ctrl": {"target": "mine.py:Ctrl", "file": "/home/.../mine.py",
                                       "sha256": "77b0..."}}}
 
-``controllers`` is there only where an agent is named by an import path: the file its class is
-in, so that the run's controllers can be rebuilt from another folder.
+``controllers`` is there only where an agent is named by an import path (the file its class is
+in) or by a policy file of another library (that file), so that the run's controllers can be
+rebuilt from another folder; a controller evaluated as an object in memory is recorded as
+``{"in_memory": "module.Class"}``, which nothing rebuilds.
 
 ``dirty`` is true when a file of the code (anything tracked or untracked outside ``docs/``, the
 folder results are written to) differs from the commit; ``commit`` is null outside a git
@@ -102,11 +104,12 @@ def machine() -> dict[str, Any]:
 
 def controller_files(agents: Iterable[str]) -> dict[str, dict[str, str]]:
     """Per agent named by an import path (``module:Class``, ``path/to/file.py:Class``, with
-    arguments or not), the absolute path and SHA-256 of the file its class is in: what rebuilds
+    arguments or not), the absolute path and SHA-256 of the file its class is in (of a policy
+    file of another library, ``model.zip`` or ``policy.pt2``, that file): what rebuilds
     the controller from another folder (``marl-vertiport worst-day``) and tells whether the file
     changed since."""
     from agents.common.imports import target_file
-    from agents.common.specs import AgentSpecError, split_spec
+    from agents.common.specs import AgentSpecError, foreign_kind, split_spec
 
     out: dict[str, dict[str, str]] = {}
     for spec in agents:
@@ -114,7 +117,12 @@ def controller_files(agents: Iterable[str]) -> dict[str, dict[str, str]]:
             target, _ = split_spec(spec)
         except AgentSpecError:
             continue
-        path = target_file(target) if ":" in target else None
+        if ":" in target:
+            path = target_file(target)
+        elif foreign_kind(target) in ("sb3", "exported") and Path(target).is_file():
+            path = Path(target).resolve()  # a policy file of another library
+        else:
+            path = None
         if path is not None:
             out[spec] = {"target": target, "file": str(path), "sha256": file_sha256(path)}
     return out

@@ -20,7 +20,7 @@ One job per module, each importing only those listed before it:
 from agents.evaluate.cli import main
 from agents.evaluate.episodes import run_task
 from agents.evaluate.report import write_outputs
-from agents.evaluate.run import evaluate
+from agents.evaluate.run import evaluate, evaluate_controller
 from agents.evaluate.settings import (
     DEFAULT_AGENTS, DEFAULT_CONFIGS, SUITE_DIR, EpisodeRecord, EpisodeTask, EvalSettings,
     Evaluation, InputError, load_suite, parse_overrides,
@@ -31,6 +31,7 @@ from agents.evaluate.tables import format_table
 __all__ = [
     "DEFAULT_AGENTS", "DEFAULT_CONFIGS", "SUITE_DIR", "EpisodeRecord", "EpisodeTask",
     "EvalSettings", "Evaluation", "InputError", "bootstrap_ci", "describe", "evaluate",
+    "evaluate_controller",
     "format_table", "load_suite", "main", "parse_overrides", "run_task", "summarize",
     "write_outputs",
 ]

@@ -17,9 +17,12 @@ What RLlib needs from the env, and what this module adds for it:
   more often than not, so :func:`ppo_config` turns it off (``disable_env_checking=True``).
 * One RLModule (``"shared"``) acts for every eVTOL.
 
-A minimal run::
+A minimal run (one torch thread: several times faster than torch's default on these small
+batches, docs/ecosystem.md)::
 
     import ray
+    import torch
+    torch.set_num_threads(1)
     from agents.interop.rllib_env import ppo_config
 
     ray.init(num_cpus=2, include_dashboard=False)
@@ -27,7 +30,11 @@ A minimal run::
                                   "overrides": {"schedule.episode_steps": 64}}).build_algo()
     for _ in range(3):
         print(algo.train()["env_runners"]["episode_return_mean"])
+    algo.save_to_path("runs/rllib/paper")  # or save_policy(algo, ..., env), with the columns
     algo.stop()
+
+and every command plays the checkpoint: ``marl-vertiport evaluate --agents runs/rllib/paper
+dispatcher`` (:class:`agents.controllers.foreign.RLlibController`, weights only).
 """
 
 from __future__ import annotations
@@ -36,11 +43,11 @@ from typing import Any
 
 from agents.interop import require
 from marl_vertiport.flat import FlatAEC
-from agents.interop.nets import mlp, symlog
+from agents.common.nets import mlp, symlog
 from marl_vertiport import vertiport_v1
 
 __all__ = ["ENV_NAME", "MODULE_ID", "MaskedActorCritic", "env_creator", "make_env",
-           "ppo_config", "register"]
+           "ppo_config", "register", "save_policy"]
 
 EXTRA = "rllib"
 ENV_NAME = "marl_vertiport/vertiport_v1"
@@ -129,6 +136,22 @@ def ppo_config(env_config: dict | None = None, *, hidden: int = 64, seed: int = 
                   num_epochs=epochs, lr=lr)
         .debugging(seed=seed)
     )
+
+
+def save_policy(algo_or_module: Any, folder: Any, env: Any) -> Any:
+    """Save an algorithm (its checkpoint) or one RLModule (its weights) to ``folder`` with RLlib's
+    ``save_to_path``, and beside it what the project's loader checks: the flat columns of the
+    vertiport ``env`` (any of its envs) it was trained on
+    (:data:`agents.controllers.foreign.METADATA`). The folder."""
+    import json
+    from pathlib import Path
+
+    from agents.controllers.foreign import METADATA, metadata_for
+
+    folder = Path(folder)
+    algo_or_module.save_to_path(folder.resolve().as_posix())
+    (folder / METADATA).write_text(json.dumps(metadata_for(env, "flat")))
+    return folder
 
 
 def _one_module(agent_id: str, episode: Any = None, **kwargs: Any) -> str:

@@ -25,8 +25,11 @@ BenchMARL's models read. :func:`ppo` then takes every agent's row into the loss 
 a row whose mask leaves one action has a log-probability of 0 and adds nothing to the
 objective, only to the critic.
 
-A minimal run::
+A minimal run (one torch thread: several times faster than torch's default on these small
+batches, docs/ecosystem.md)::
 
+    import torch
+    torch.set_num_threads(1)
     from agents.interop.torchrl_env import make_env, make_actor, make_critic, ppo
 
     env = make_env("paper", seed=0, **{"schedule.episode_steps": 64})
@@ -45,7 +48,7 @@ import torch
 from torch import nn
 
 from agents.interop import require
-from agents.interop.nets import mlp, symlog
+from agents.common.nets import mlp, symlog
 from marl_vertiport import vertiport_v1
 
 __all__ = ["ACTING", "ACTION", "ACTION_MASK", "GROUP", "LOG_PROB", "OBSERVATION", "VALUE",

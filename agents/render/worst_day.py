@@ -14,8 +14,9 @@ the window to show (``--before-min`` minutes before the first loss or contact to
 and checks that the replay earns the reward the run recorded; then again, rendered over that
 window with each turn's decision on the frames. Writes into ``<run>/worst_day/``:
 ``<agent>_<config>.gif``, ``<agent>_<config>.decisions.csv`` and ``.json`` (the whole day's
-log) and ``index.md``, a table of the picks, why, the event's minute, the window and whether
-the replay matched.
+log), ``<agent>_<config>.timeline.png`` (the day at a glance) and ``index.md``, a table of the
+picks, why, the event's minute, the window and whether the replay matched. ``--no-video``
+plays each day once and writes all but the video: every worst day's timeline in seconds.
 """
 
 from __future__ import annotations
@@ -70,9 +71,10 @@ def lowest_reward_window(rows: list[dict[str, Any]], steps: int) -> int:
 
 def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
            before_min: float, after_min: float, window_min: float, size: tuple[int, int],
-           progress: bool, spec: str | None = None) -> dict[str, Any]:
-    """Play ``pick``'s day whole with its log, then render its window; the index's row.
-    ``spec`` builds the controller (default: ``pick.agent``; :func:`rebuildable`)."""
+           progress: bool, spec: str | None = None, video: bool = True) -> dict[str, Any]:
+    """Play ``pick``'s day whole with its log and its timeline, then (``video``) render its
+    window; the index's row. ``spec`` builds the controller (default: ``pick.agent``;
+    :func:`rebuildable`)."""
     spec = pick.agent if spec is None else spec
     policy = make_controller(spec)
     env = versioned_env(pick.config, overrides, rules)
@@ -93,14 +95,20 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
         n_steps = max(1, int(round(window_min / mps)))
         start = lowest_reward_window(log.rows, n_steps)
     stem = f"{pick.agent}_{pick.config}".replace(":", "_").replace("/", "_").replace(".", "_")
-    video = out / f"{stem}.gif"
+    gif = out / f"{stem}.gif"
     write_atomic(out / f"{stem}.timeline.png", timeline_png(
         timeline, f"{pick.agent} on {pick.config}, day {pick.seed} ({pick.reason})",
         [pick.agent]))
     log.write(out / f"{stem}.decisions", {
         "agent": pick.agent, "config": pick.config, "seed": pick.seed, "reason": pick.reason,
-        "overrides": overrides, "rules": rules, "video": video.name,
+        "overrides": overrides, "rules": rules, "video": gif.name if video else None,
         "first_frame_step": start, "event_step": event})
+    row = {"pick": pick, "event_minute": None if event is None else event * mps,
+           "window": (start * mps, (start + n_steps) * mps), "matched": matched,
+           "replayed_reward": metrics["total_reward"], "video": gif.name if video else None,
+           "log": f"{stem}.decisions.csv", "timeline": f"{stem}.timeline.png"}
+    if not video:
+        return row
     env = versioned_env(pick.config, overrides, rules, render_mode="rgb_array")
     try:
         colours = [rgb(VEHICLE_COLOURS[i % len(VEHICLE_COLOURS)])
@@ -112,11 +120,8 @@ def replay(pick: WorstDay, overrides: dict[str, Any], rules: int, out: Path, *,
             log=DecisionLog(player))
     finally:
         env.close()
-    write_video(frames, video, 8.0, colours)
-    return {"pick": pick, "event_minute": None if event is None else event * mps,
-            "window": (start * mps, (start + n_steps) * mps), "matched": matched,
-            "replayed_reward": metrics["total_reward"], "video": video.name,
-            "log": f"{stem}.decisions.csv", "timeline": f"{stem}.timeline.png"}
+    write_video(frames, gif, 8.0, colours)
+    return row
 
 
 def index_markdown(run: Path, rows: list[dict[str, Any]]) -> str:
@@ -139,7 +144,8 @@ def index_markdown(run: Path, rows: list[dict[str, Any]]) -> str:
                      f"{r['window'][0]:g}-{r['window'][1]:g} | {p.total_reward:.1f} | "
                      f"{p.vehicles_lost} | {p.contacts} | "
                      f"{'yes' if r['matched'] else 'NO: ' + format(r['replayed_reward'], '.1f')} | "
-                     f"[{r['video']}]({r['video']}) | [{r['log']}]({r['log']}) | "
+                     f"{'-' if r['video'] is None else '[%s](%s)' % (r['video'], r['video'])} | "
+                     f"[{r['log']}]({r['log']}) | "
                      f"[{r['timeline']}]({r['timeline']}) |")
     return "\n".join(lines) + "\n"
 
@@ -160,6 +166,9 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
                     help="frame size WxH (default: %(default)s)")
     ap.add_argument("--out", type=Path, default=None,
                     help="output folder (default: <run>/worst_day)")
+    ap.add_argument("--no-video", action="store_true",
+                    help="the timelines and decision logs only, no video (seconds a day for a "
+                         "rule)")
     ap.add_argument("--no-progress", action="store_true")
     return ap
 
@@ -183,6 +192,10 @@ def rebuildable(spec: str, record: dict[str, Any]) -> str:
         entry = (record.get("controllers") or {}).get(spec)
         if not entry:
             raise RenderError(f"{exc} (and the run's record names no file for it)") from None
+        if "file" not in entry:
+            raise RenderError(f"agent {spec!r} was an object in memory "
+                              f"({entry.get('in_memory', 'unknown class')}); nothing rebuilds it "
+                              "from the run's files") from None
     path = Path(entry["file"])
     if not path.is_file():
         raise RenderError(f"agent {spec!r}: not found from here, and the file the run played, "
@@ -191,8 +204,10 @@ def rebuildable(spec: str, record: dict[str, Any]) -> str:
         raise RenderError(f"agent {spec!r}: {path} changed since the run (SHA-256 "
                           f"{entry['sha256'][:16]} then): replaying it would not be the run")
     _, sep, args = spec.partition("[")
-    attr = split_spec(spec)[0].rpartition(":")[2]
-    return f"{path}:{attr}" + (f"[{args}" if sep else "")
+    target = split_spec(spec)[0]
+    if ":" not in target:  # a policy file of another library: the file itself
+        return f"{path}" + (f"[{args}" if sep else "")
+    return f"{path}:{target.rpartition(':')[2]}" + (f"[{args}" if sep else "")
 
 
 def _read_run(run: Path) -> tuple[dict[str, Any], list[dict[str, str]]]:
@@ -227,7 +242,7 @@ def _run(args: argparse.Namespace) -> int:
              if (args.agents is None or w.agent in args.agents)
              and (args.configs is None or w.config in args.configs)]
     if not picks:
-        raise RenderError(f"no day of {path} matches --agents {args.agents} --configs {args.configs}")
+        raise RenderError(f"no day of {args.run} matches --agents {args.agents} --configs {args.configs}")
     out = args.out or args.run / "worst_day"
     overrides = dict(settings.get("overrides") or {})
     rules = int(settings.get("rules", LATEST_RULES))
@@ -239,9 +254,11 @@ def _run(args: argparse.Namespace) -> int:
         row = replay(pick, overrides, rules, out, before_min=args.before_min,
                      after_min=args.after_min, window_min=args.window_min, size=size,
                      progress=not args.no_progress,
-                     spec=rebuildable(pick.agent, settings["provenance"]))
+                     spec=rebuildable(pick.agent, settings["provenance"]),
+                     video=not args.no_video)
         note = "" if row["matched"] else " (the replay's reward differs from the run's: another code or machine)"
-        print(f"    wrote {out / row['video']} and its decision log, {time.perf_counter() - t0:.0f} s{note}",
+        made = out / (row["video"] or row["timeline"])
+        print(f"    wrote {made} and its decision log, {time.perf_counter() - t0:.0f} s{note}",
               file=sys.stderr)
         rows.append(row)
     write_atomic(out / "index.md", index_markdown(args.run, rows))
