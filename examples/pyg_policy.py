@@ -76,6 +76,9 @@ class PygController:
 
 
 if __name__ == "__main__":
+    # One torch thread: on batches this small, torch's default (a thread per core) is several
+    # times slower on a busy machine (experiments/torch-threads-small-batches).
+    torch.set_num_threads(1)
     days = int(sys.argv[1]) if len(sys.argv) > 1 else 1
     for config in ("paper", "mid"):  # one set of weights, two vertiports
         env = vertiport_v1.env(config=config)

@@ -134,6 +134,38 @@ def torchrl_training(steps: int, seed: int) -> int:
     return max(1, steps // batch) * batch
 
 
+#: The RLlib algorithm of the timed runs, built once (building it is not training).
+_RLLIB: dict[str, Any] = {}
+RLLIB_BATCH = 512
+
+
+def rllib_training(steps: int, seed: int) -> int:
+    """RLlib's PPO (``agents.interop.rllib_env.ppo_config``: env runner and learner in this
+    process) for ``steps // 512`` iterations of 512 AEC steps; the algorithm is built once."""
+    import ray
+
+    from agents.interop import rllib_env
+
+    if "algo" not in _RLLIB:
+        ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False,
+                 ignore_reinit_error=True)
+        config = rllib_env.ppo_config({"config": CONFIG}, seed=seed, batch_size=RLLIB_BATCH,
+                                      minibatch_size=128, epochs=4)
+        _RLLIB["algo"] = config.build_algo()
+    iterations = max(1, steps // RLLIB_BATCH)
+    for _ in range(iterations):
+        _RLLIB["algo"].train()
+    return iterations * RLLIB_BATCH
+
+
+def _stop_rllib() -> None:
+    if "algo" in _RLLIB:
+        import ray
+
+        _RLLIB.pop("algo").stop()
+        ray.shutdown()
+
+
 #: name -> (what it measures, extra it needs or None, function(steps, seed) -> steps done)
 MEASURES: dict[str, tuple[str, str | None, Callable[[int, int], int]]] = {
     "pettingzoo_aec": ("vertiport_v1.env(), random legal play", None, aec_steps),
@@ -149,14 +181,16 @@ MEASURES: dict[str, tuple[str, str | None, Callable[[int, int], int]]] = {
                     lambda s, k: torchrl_steps(s, k, "aec")),
     "torchrl_parallel": ("PettingZooWrapper(parallel_env()) as BenchMARL builds it, rollout",
                          "torchrl", lambda s, k: torchrl_steps(s, k, "parallel")),
-    "sb3_maskable_ppo": ("MaskablePPO('MlpPolicy') training on VertiportFlat-v1", "sb3",
-                         sb3_training),
+    "sb3_maskable_ppo": ("MaskablePPO('MlpPolicy') training on VertiportFlat-v1 (the recipe's "
+                         "and the docs snippet's settings)", "sb3", sb3_training),
     "torchrl_ppo_parallel": ("agents.interop.torchrl_env.ppo on the flat Parallel env", "torchrl",
                              torchrl_training),
+    "rllib_ppo": ("RLlib PPO (agents.interop.rllib_env.ppo_config) training on the AEC env",
+                  "rllib", rllib_training),
 }
 
 #: The module each extra provides (a missing one skips its rows).
-EXTRA_MODULES = {"torchrl": "torchrl", "sb3": "sb3_contrib"}
+EXTRA_MODULES = {"torchrl": "torchrl", "sb3": "sb3_contrib", "rllib": "ray.rllib"}
 
 
 def measure(name: str, steps: int, repeats: int, seed: int = 2400) -> dict[str, Any]:
@@ -195,7 +229,11 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.only or list(MEASURES):
         steps = args.train_steps if "ppo" in name else args.steps
         print(f"  {name} ...", file=sys.stderr, flush=True)
-        rows.append(measure(name, steps, args.repeats))
+        try:
+            rows.append(measure(name, steps, args.repeats))
+        finally:
+            if name == "rllib_ppo":
+                _stop_rllib()
     result = {"command": " ".join(["python -m agents.bench.ecosystem", *(argv or sys.argv[1:])]),
               "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
               "python": platform.python_version(), "provenance": provenance(), "rows": rows}
