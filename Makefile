@@ -127,7 +127,7 @@ render: $(STAMP)  ## write an animated GIF of one episode of AGENT on CONFIG, wi
 bench: $(STAMP)  ## measure env, physics, vector, inference and training speed (docs/performance.md)
 	$(CLI) bench --out runs/bench --report docs/performance.md
 
-bench-ecosystem: $(STAMP)  ## the env's speed through each library of docs/ecosystem.md (PettingZoo AEC and Parallel, Gymnasium, SuperSuit, TorchRL, SB3): steps per second, one process (runs/bench/ecosystem.json; about 2 minutes)
+bench-ecosystem: $(STAMP)  ## the env's speed through each library of docs/ecosystem.md (PettingZoo AEC and Parallel, Gymnasium, SuperSuit, TorchRL, SB3, RLlib): steps per second, one process (runs/bench/ecosystem.json; about 4 minutes)
 	$(PY) -m agents.bench.ecosystem --out runs/bench
 
 bench-compare: $(STAMP)  ## the env under the dispatcher's traffic here and in the checkout BASE=path (a git worktree of another commit): medians of 5 interleaved replays and their ratio

@@ -244,3 +244,37 @@ def test_the_version_is_the_same_everywhere_and_the_changelog_has_it():
     assert releases and releases[0] == version, f"the newest CHANGELOG entry is {releases[:1]}"
     for rules in RULES_VERSIONS:
         assert re.search(rf"^### v{rules}$", changelog, flags=re.M), f"no CHANGELOG entry for v{rules}"
+
+
+#: Code a user copies: the guide's Python blocks, the examples, the adapters' docstring recipes.
+RECIPE_FILES = [*sorted((ROOT / "examples").glob("*.py")),
+                *sorted((ROOT / "agents" / "interop").glob("*_env.py"))]
+
+
+def _uses_torch(code: str) -> bool:
+    return bool(re.search(r"^\s*(import torch|from torch|from agents\.interop|import ray|"
+                          r"from sb3_contrib|from torch_geometric)", code, re.M))
+
+
+def test_every_recipe_that_runs_torch_sets_one_thread():
+    """On these small batches torch's default threads are several times slower on a busy
+    machine (experiments/torch-threads-small-batches): every block, example and recipe a user
+    copies that runs torch sets one thread."""
+    missing = []
+    for page in GUIDE:
+        for line, lang, code, _ in blocks(page):
+            if lang == "python" and _uses_torch(code) and "set_num_threads(1)" not in code:
+                missing.append(f"{rel(page)}:{line}")
+    for path in RECIPE_FILES:
+        text = path.read_text()
+        if _uses_torch(text) and "set_num_threads(1)" not in text:
+            missing.append(rel(path))
+    assert not missing, f"sets no torch thread count: {missing}"
+
+
+def test_the_ecosystem_page_quotes_every_library_the_benchmark_measures():
+    from agents.bench.ecosystem import MEASURES
+
+    text = (ROOT / "docs" / "ecosystem.md").read_text()
+    assert not [name for name in MEASURES if f"`{name}`" not in text], \
+        "docs/ecosystem.md quotes a speed for each row of make bench-ecosystem"
