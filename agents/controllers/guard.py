@@ -89,7 +89,8 @@ import numpy as np
 from agents.common.names import canonical_kwargs, note_renamed
 from agents.controllers.base import Controller
 from agents.controllers.lookahead_settings import PREFERRED_COLUMN, LookaheadSettings
-from agents.controllers.planner import ScratchRollouts, nominal_config, roll_out
+from agents.controllers.planner import (ScratchRollouts, held_terms_value, nominal_config,
+                                        roll_out)
 from agents.controllers.search import wide_choice
 from marl_vertiport.sim.core import VertiportSim
 from marl_vertiport.sim.schema import HOVERING, ON_CHARGER, ON_PORT
@@ -173,6 +174,8 @@ class GuardController(ScratchRollouts, Controller):
         #: The wide search's value of each candidate of its last decision (reward less
         #: :data:`~agents.controllers.search.LOSS_COST` per vehicle lost, on average).
         self.search_q: dict[int, float] = {}
+        #: Per action of the last :meth:`evaluate`: each rollout's (vehicles lost, reward).
+        self.last_runs: dict[int, list[tuple[float, float]]] = {}
         #: This episode's decisions checked by rollouts, decisions changed, decisions handed to
         #: the rollout policy (``defer_pct``, ``margin_pct``, ``reward_margin``), and those of
         #: them where the rollout policy's choice earned more in the rollouts
@@ -258,7 +261,8 @@ class GuardController(ScratchRollouts, Controller):
                  stop_at_loss: bool = False, policy: Any = None, runs: int | None = None
                  ) -> tuple[dict[int, tuple[float, float, float]], float]:
         """Per action, the mean over its rollouts of the vehicles lost (beyond those already
-        lost; with ``floor_pct``, also those whose charge fell below it), of the reward and of
+        lost; with ``floor_pct``, also those whose charge fell below it), of the reward (with
+        ``leaf_turns``, plus the value of the rollout's end state) and of
         the least charge (%) of a live vehicle in the rollout; and the least charge (%) of a
         live vehicle seen in any rollout step. ``stop_at_loss``: stop
         an action's rollouts at the first that loses a vehicle (its means are then over the
@@ -286,17 +290,25 @@ class GuardController(ScratchRollouts, Controller):
                 below[floored & live & (s.battery < floor_pct)] = True
 
         least = 100.0
+        leaf_turns = self.settings.leaf_turns
         values: dict[int, tuple[float, float, float]] = {}
+        self.last_runs = {}
         for a in actions:
             lost = reward = margin = 0.0
             played = 0
+            runs = self.last_runs[a] = []
             for k in range(runs_per_action):
                 rng = None if self.settings.clairvoyant else np.random.default_rng(
                     (self.settings.seed, self._episode_seed, sim.step_count, k))
                 run_least[0] = 100.0
                 below[:] = False
-                reward += roll_out(scratch, builder, policy, snap, a, steps, rng, watch)
-                lost += int(np.count_nonzero(scratch.lost | below)) - lost_before
+                run_reward = roll_out(scratch, builder, policy, snap, a, steps, rng, watch)
+                if leaf_turns > 0:
+                    run_reward += held_terms_value(scratch, leaf_turns)
+                run_lost = int(np.count_nonzero(scratch.lost | below)) - lost_before
+                runs.append((float(run_lost), run_reward))
+                reward += run_reward
+                lost += run_lost
                 margin += run_least[0]
                 least = min(least, run_least[0])
                 played += 1

@@ -94,6 +94,16 @@ class LookaheadSettings:
     actions (every legal one where the proposer has no probabilities, or where ``candidates``
     is at least their number) with the same draws, and take the one that loses the fewest
     vehicles, then earns the most (0: the two-candidate look-ahead above)."""
+    leaf_turns: float = 0.0
+    """Add to each rollout's reward the value of its end state: each vehicle's battery and delay
+    terms held for this many more turns of its own, a vehicle out of service earning the worst
+    (:func:`~agents.controllers.planner.held_terms_value`, the planner's terminal value; 0:
+    none)."""
+    confidence: float = 0.0
+    """In the wide search: a candidate replaces the rollout policy's choice only where its
+    paired gain over it (reward, less :data:`~agents.controllers.search.LOSS_COST` per vehicle
+    lost, rollout by rollout on the same draws) has a mean at least ``confidence`` standard
+    errors above ``reward_margin`` (0: the means decide, losses first)."""
 
     def __post_init__(self) -> None:
         if self.horizon_min <= 0:
@@ -114,6 +124,10 @@ class LookaheadSettings:
                              "be nominal (without the config's uncertainties)")
         if self.candidates < 0:
             raise ValueError(f"candidates must be >= 0, got {self.candidates}")
+        if self.leaf_turns < 0:
+            raise ValueError(f"leaf_turns must be >= 0 turns, got {self.leaf_turns}")
+        if self.confidence < 0:
+            raise ValueError(f"confidence must be >= 0 standard errors, got {self.confidence}")
         if self.prefer not in PREFERRED_COLUMN:
             raise ValueError(f"prefer must be one of {sorted(PREFERRED_COLUMN)}, "
                              f"got {self.prefer!r}")

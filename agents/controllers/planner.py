@@ -82,6 +82,25 @@ def roll_out(scratch: VertiportSim, builder: ObservationBuilder, base: Controlle
     return total
 
 
+def held_terms_value(sim: VertiportSim, turns_per_vehicle: float) -> float:
+    """What the rest of the day is worth beyond a rollout's horizon, estimated as each vehicle's
+    battery and delay terms held at their values in ``sim`` for its next ``turns_per_vehicle``
+    turns (fewer near the end of the day). A vehicle out of service earns the worst of both for
+    good, so a decision that strands a vehicle just before the horizon ends is charged for the
+    rest of its day, not for a few steps; a vehicle under the battery threshold is charged the
+    worst battery term as long as it stays there."""
+    rw = sim.cfg.reward
+    turns = min(turns_per_vehicle, (sim.cfg.schedule.episode_steps - sim.step_count) / sim.n)
+    if turns <= 0:
+        return 0.0
+    lam_sum = beta_sum = 0.0
+    for v in range(sim.n):
+        lam, beta = sim.battery_delay_terms(v)
+        lam_sum += lam
+        beta_sum += -rw.term_magnitude if sim.status[v] == OUT_OF_SERVICE else beta
+    return float(turns * (rw.battery_weight * lam_sum + rw.delay_weight * beta_sum))
+
+
 class ScratchRollouts:
     """What a model-based controller needs to roll a controller out: a scratch copy of the bound
     env's simulator (without the config's uncertainties when ``nominal``) and its observation
@@ -265,21 +284,9 @@ class PlannerController(ScratchRollouts, Controller):
         return int(np.count_nonzero(sim.lost))
 
     def terminal_value(self, sim: VertiportSim) -> float:
-        """What the rest of the day is worth beyond the horizon, estimated as each vehicle's
-        battery and delay terms held at their values at the horizon for its next
-        ``terminal_turns`` turns (fewer near the end of the day). A vehicle out of service
-        earns the worst of both for good, so a decision that strands a vehicle just before the
-        horizon ends is charged for the rest of its day, not for a few steps."""
-        rw = sim.cfg.reward
-        turns = min(self.terminal_turns, (sim.cfg.schedule.episode_steps - sim.step_count) / sim.n)
-        if turns <= 0:
-            return 0.0
-        lam_sum = beta_sum = 0.0
-        for v in range(sim.n):
-            lam, beta = sim.battery_delay_terms(v)
-            lam_sum += lam
-            beta_sum += -rw.term_magnitude if sim.status[v] == OUT_OF_SERVICE else beta
-        return float(turns * (rw.battery_weight * lam_sum + rw.delay_weight * beta_sum))
+        """What the rest of the day is worth beyond the horizon (:func:`held_terms_value` over
+        ``terminal_turns`` turns)."""
+        return held_terms_value(sim, self.terminal_turns)
 
     def act(self, observation: dict) -> int:
         sim = self.sim
