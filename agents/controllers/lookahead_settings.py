@@ -93,7 +93,8 @@ class LookaheadSettings:
     out the rollout policy's choice and the proposer's ``candidates`` most probable legal
     actions (every legal one where the proposer has no probabilities, or where ``candidates``
     is at least their number) with the same draws, and take the one that loses the fewest
-    vehicles, then earns the most (0: the two-candidate look-ahead above)."""
+    vehicles, then earns the most; it takes the place of ``defer_pct`` and ``margin_pct`` (0:
+    the two-candidate look-ahead above)."""
     leaf_turns: float = 0.0
     """Add to each rollout's reward the value of its end state: each vehicle's battery and delay
     terms held for this many more turns of its own, a vehicle out of service earning the worst
