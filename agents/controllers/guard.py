@@ -174,6 +174,10 @@ class GuardController(ScratchRollouts, Controller):
         #: The wide search's value of each candidate of its last decision (reward less
         #: :data:`~agents.controllers.search.LOSS_COST` per vehicle lost, on average).
         self.search_q: dict[int, float] = {}
+        #: The two candidates of the last decision's reward contest (``reward_margin``), the
+        #: proposer's choice and the rollout policy's, each as in :attr:`last_values`; empty
+        #: where there was none.
+        self.last_contest: dict[int, tuple[float, float, float]] = {}
         #: Per action of the last :meth:`evaluate`: each rollout's (vehicles lost, reward).
         self.last_runs: dict[int, list[tuple[float, float]]] = {}
         #: This episode's decisions checked by rollouts, decisions changed, decisions handed to
@@ -363,6 +367,7 @@ class GuardController(ScratchRollouts, Controller):
         if own == choice or own in self._hops(sim, sim.acting):
             return choice, first, least
         theirs, their_least = self.evaluate(sim, [own], stop_at_loss=True)
+        self.last_contest = {choice: first[choice], own: theirs[own]}
         if theirs[own][0] > 0 or theirs[own][1] < first[choice][1] + self.settings.reward_margin:
             return choice, first, least
         self.last_deferred = True
@@ -396,7 +401,7 @@ class GuardController(ScratchRollouts, Controller):
                 choice = self._handed_over(observation)
             if choice in hops:
                 choice = sim.actions.stay
-        self.last_values, self.search_q = {}, {}
+        self.last_values, self.search_q, self.last_contest = {}, {}, {}
         self.last_changed = False
         if sim.status[v] not in (ON_PORT, ON_CHARGER, HOVERING) or sim.step_count < self._quiet_until_step:
             return choice

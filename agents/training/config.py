@@ -33,7 +33,8 @@ class PretrainConfig:
     """Steps of each of those episodes."""
     teacher: str = "planner"
     """``planner`` (the look-ahead planner), ``guarded_planner`` (the planner behind the guard),
-    ``search`` (the wide look-ahead search, with the config's uncertainties) or ``dispatcher``
+    ``search`` (the wide look-ahead search, with the config's uncertainties), ``lookahead`` (the
+    learned ATC's look-ahead around the actor being fit: expert iteration) or ``dispatcher``
     (the expert dispatcher): :mod:`agents.training.teachers`."""
     planner_horizon: int = 40
     """Steps the planner simulates per candidate action."""
@@ -218,9 +219,12 @@ class TrainConfig:
     those of the warm start. 1: as imitated."""
     init_checkpoint: str = ""
     """A checkpoint (``model_<it>.pt`` of a run, or a shipped one) whose actor and critic
-    weights PPO starts from, in place of the warm start: tensors only are read, and neither its
-    optimizer state nor its iteration. Its model must be this config's ``model``. Empty: the
-    warm start (or nothing) as ``pretrain`` and ``ensemble`` say."""
+    weights the run starts from: tensors only are read, and neither its optimizer state nor its
+    iteration. Its model must be this config's ``model``. Without a warm start
+    (``pretrain.days: 0``) PPO starts from it; with one, the warm start goes on from it: its
+    actor drives the first round and the teacher labels (DAgger from the start; with
+    ``pretrain.teacher: lookahead``, expert iteration from this policy). Empty: the warm start
+    (or nothing) as ``pretrain`` and ``ensemble`` say."""
     pretrain: PretrainConfig = field(default_factory=PretrainConfig)
     ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
     algorithm: AlgorithmConfig = field(default_factory=AlgorithmConfig)
@@ -253,9 +257,8 @@ class TrainConfig:
              or (self.pretrain.days > 0 and self.pretrain.epochs > 0), "warm_start_temperature",
              "sharpens the warm start: it needs pretrain.days and pretrain.epochs > 0, or an "
              "init_checkpoint"),
-            (not self.init_checkpoint or (self.pretrain.days == 0 and self.ensemble.fits == 0),
-             "init_checkpoint", "replaces the warm start: it needs pretrain.days: 0 and "
-             "ensemble.fits: 0"),
+            (not self.init_checkpoint or self.ensemble.fits == 0,
+             "init_checkpoint", "cannot start an ensemble's warm start: it needs ensemble.fits: 0"),
             (self.ensemble.fits >= 0, "ensemble.fits", "must be >= 0"),
             (self.ensemble.fits == 0 or (self.pretrain.days > 0 and self.pretrain.epochs > 0),
              "ensemble.fits", "refits the warm start: it needs pretrain.days and pretrain.epochs > 0"),

@@ -153,7 +153,8 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError("a day without labels needs a learner to drive it")
     env = VertiportEnv(config=from_dict(task.env_config))
     teacher = (make_teacher(task.teacher, task.planner_horizon, task.planner_margin, task.seed,
-                            **task.planner_options) if task.labelled else None)
+                            learner=task.learner, **task.planner_options)
+               if task.labelled else None)
     learner = GCNController(task.learner) if task.learner is not None else None
     log = DemonstrationLog()
     driver = Demonstrator(teacher, learner, task.noise, np.random.default_rng([task.seed, 1]), log)
@@ -370,8 +371,11 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     # (Not the worker count: the data does not depend on it.)
     made_with = {"pretrain": {k: v for k, v in dataclasses.asdict(pre).items() if k != "workers"},
                  "seed": cfg.seed, "env_config": env_config, "model": dataclasses.asdict(cfg.model),
-                 "lost_vehicle_penalty": cfg.lost_vehicle_penalty}
+                 "lost_vehicle_penalty": cfg.lost_vehicle_penalty,
+                 **({"init_checkpoint": cfg.init_checkpoint} if cfg.init_checkpoint else {})}
     sizes = padded_sizes(env_config)
+    # With an init_checkpoint the actor comes in with its weights, and drives the first round.
+    start = _learner(actor, env_config, cfg) if cfg.init_checkpoint else None
     state: dict[str, Any] = {"next_round": 0, "data": None, "fits": [], "scores": [], "stats": {},
                              "records": [], "env_steps": 0, "made_with": made_with}
     if state_path is not None and state_path.exists():
@@ -392,7 +396,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     where = backend.describe()
     for round_ in range(state["next_round"], pre.dagger_rounds + 2):
         last = round_ == pre.dagger_rounds + 1  # scores the last fit; nothing is refit
-        learner = fits[-1] if fits else None
+        learner = fits[-1] if fits else start
         drivers = fits if last and pre.keep == "paired" else [learner]
         tasks = [t for d in drivers for t in round_tasks(cfg, env_config, round_, d, last)]
         tag = ("scoring the last fit" if len(drivers) == 1 and last else
@@ -419,6 +423,10 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         score = mean_day_score(metrics, pre.day_steps, cfg.lost_vehicle_penalty)
         if learner is None:
             stats["teacher_reward"] = score
+        elif learner is start:
+            stats["start_score"] = score
+            log(f"  the starting policy scores {score:.0f} (mean reward of its days, less "
+                f"{cfg.lost_vehicle_penalty:g} per vehicle lost)")
         else:
             scores.append(score)
             log(f"  fit {len(scores) - 1} scores {scores[-1]:.0f} (mean reward of its days, "

@@ -77,10 +77,13 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         runner.current_learning_iteration += 1
         curves = [r for r in curves if r["iteration"] < runner.current_learning_iteration]
         log(f"resuming {run_dir} from {ckpt.name} at iteration {runner.current_learning_iteration}")
-    elif cfg.init_checkpoint:
+    elif cfg.init_checkpoint and not (cfg.pretrain.days > 0 and cfg.pretrain.epochs > 0):
         warm_rows, curves = [], []
         init_stage(runner, cfg, run_dir, log)
     else:
+        if cfg.init_checkpoint:  # the warm start goes on from it (its fits, once resumed)
+            load_checkpoint_into(runner, _existing(cfg.init_checkpoint), {"actor": True, "critic": True})
+            log(f"the warm start goes on from {cfg.init_checkpoint} (actor and critic weights)")
         warm_rows, curves = warm_start_stage(runner, cfg, env_cfg, run_dir, resume, log, backend), []
     phases = {"set-up and warm start": time.time() - started}
     ppo_started = time.time()
@@ -157,13 +160,19 @@ def init_stage(runner, cfg: TrainConfig, run_dir: Path, log: Log) -> None:
     """PPO starts from ``cfg.init_checkpoint``'s actor and critic (weights only), sharpened by
     ``warm_start_temperature``; the run keeps its starting point as ``model_warmstart.pt``
     (unsharpened, as a warm start's)."""
-    path = Path(cfg.init_checkpoint)
-    if not path.is_file():
-        raise ConfigError(f"init_checkpoint: {path}: no such file")
+    path = _existing(cfg.init_checkpoint)
     load_checkpoint_into(runner, path, {"actor": True, "critic": True})
     runner.save(str(run_dir / "model_warmstart.pt"), {"init_checkpoint": str(path)})
     log(f"PPO starts from {path} (actor and critic weights)")
     sharpen_start(runner, cfg, log)
+
+
+def _existing(init_checkpoint: str) -> Path:
+    """``init_checkpoint`` as a path, refused where no file is there."""
+    path = Path(init_checkpoint)
+    if not path.is_file():
+        raise ConfigError(f"init_checkpoint: {path}: no such file")
+    return path
 
 
 def ppo_stage(runner, vec_env, cfg: TrainConfig, run_dir: Path, curves: list[dict[str, float]],

@@ -15,6 +15,13 @@
   uncertainty the planner's nominal model leaves out. Its candidates' values (reward less 1 000
   per vehicle lost) weight the decisions (``regret_cap``), and a decision where one candidate
   loses a vehicle another keeps weighs as one that loses a vehicle.
+- ``lookahead``: the learned ATC's own look-ahead (:mod:`agents.controllers.lookahead`, the
+  shipped preset) around the learner: the actor being fit proposes, and its choice stands
+  unless the rollouts (the dispatcher flying, the config's gusts and failures, common random
+  numbers) hand the decision to the dispatcher. Each round's teacher is built on that round's
+  learner, so a better policy makes a better teacher (expert iteration); without a learner
+  (behaviour cloning with no ``start_checkpoint``) the dispatcher proposes. See
+  :class:`LookaheadTeacher` for what a decision weighs.
 - ``dispatcher``: the expert dispatcher itself.
 
 The names before 0.2.0 (``rollout``, ``guarded_rollout``, ``heuristic``) still load, with a note
@@ -25,17 +32,18 @@ from __future__ import annotations
 
 from typing import Any
 
-TEACHERS = ("planner", "guarded_planner", "search", "dispatcher")
+TEACHERS = ("planner", "guarded_planner", "search", "lookahead", "dispatcher")
 
 #: The planner's options a training config may set (``pretrain.planner_<option>``).
 PLANNER_OPTIONS = ("expect_failures", "rescue")
 
 
 def make_teacher(name: str, planner_horizon: int, planner_margin: float, seed: int,
-                 **planner_options: Any):
+                 learner: dict[str, Any] | None = None, **planner_options: Any):
     """The teacher ``name`` (a name from before 0.2.0 is read as its new name, with a note);
     ``planner_options`` (of :data:`PLANNER_OPTIONS`) go to the planner of ``planner`` and
-    ``guarded_planner``."""
+    ``guarded_planner``; ``learner`` (checkpoint content, the actor being fit) is the proposer
+    of ``lookahead`` (``None``: the dispatcher)."""
     from agents.common.names import RENAMED_TEACHERS, note_renamed
     from agents.controllers.dispatcher import DispatcherController
     from agents.controllers.planner import PlannerController
@@ -48,6 +56,8 @@ def make_teacher(name: str, planner_horizon: int, planner_margin: float, seed: i
         raise ValueError(f"planner options {sorted(unknown)}: use some of {PLANNER_OPTIONS}")
     if name == "dispatcher":
         return DispatcherController()
+    if name == "lookahead":
+        return LookaheadTeacher(learner, seed)
     if name == "search":
         from agents.controllers.guard import GuardController
         from agents.controllers.lookahead_settings import LookaheadSettings
@@ -65,3 +75,47 @@ def make_teacher(name: str, planner_horizon: int, planner_margin: float, seed: i
 
         return GuardController(proposer=planner, rollout_policy=DispatcherController(), seed=seed)
     return planner
+
+
+class LookaheadTeacher:
+    """The look-ahead of the learned ATC around ``learner`` (checkpoint content; ``None``: the
+    dispatcher proposes), labelling each decision with what the look-ahead takes.
+
+    What a wrong choice costs (:func:`agents.training.imitation.label_weights`): where the
+    look-ahead rolled out both the learner's choice and the dispatcher's (its reward contest,
+    the same draws for both), their values, reward less
+    :data:`~agents.controllers.search.LOSS_COST` per vehicle lost, are :attr:`last_q`; where it
+    left the learner's choice for safety (that choice lost a vehicle or brought a charge under
+    the margin, or the vehicle is below ``defer_pct``), the decision is :attr:`last_forced` and
+    weighs the most. Elsewhere the learner's choice stands and is its label, at weight 1."""
+
+    def __init__(self, learner: dict[str, Any] | None, seed: int) -> None:
+        from agents.controllers.dispatcher import DispatcherController
+        from agents.controllers.gcn import GCNController
+        from agents.controllers.lookahead import LookaheadController
+
+        proposer = DispatcherController() if learner is None else GCNController(learner)
+        #: The look-ahead that decides.
+        self.look = LookaheadController(proposer=proposer, rollout_policy=DispatcherController(),
+                                        seed=seed)
+        self.last_q: dict[int, float] = {}
+        self.last_forced = False
+
+    def bind(self, sim: Any) -> None:
+        self.look.bind(sim)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.look.reset(seed=seed)
+
+    def close(self) -> None:
+        self.look.close()
+
+    def act(self, observation: dict) -> int:
+        from agents.controllers.search import LOSS_COST
+
+        look = self.look
+        proposal = int(look.proposer.act(observation))
+        label = int(look.act(observation))
+        self.last_q = {a: v[1] - LOSS_COST * v[0] for a, v in look.last_contest.items()}
+        self.last_forced = label != proposal and not self.last_q
+        return label

@@ -82,8 +82,8 @@ def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatc
     chosen: list[int] = []
     original = imitation.make_teacher
 
-    def recording_teacher(*args):
-        teacher = original(*args)
+    def recording_teacher(*args, **kwargs):
+        teacher = original(*args, **kwargs)
         act = teacher.act
         teacher.act = lambda obs: chosen.append(int(act(obs))) or chosen[-1]
         return teacher

@@ -330,7 +330,32 @@ def test_ppo_can_start_from_a_checkpoint_in_place_of_the_warm_start(tmp_path):
                                           "model": {"hidden": 8, "hidden_dims": [8]}})
     with pytest.raises(ValueError, match="cannot be loaded into this run"):
         train(other, tmp_path / "other", log=lambda *_: None, evaluate=False)
-    with pytest.raises(ConfigError, match="init_checkpoint: replaces the warm start"):
+    with pytest.raises(ConfigError, match="init_checkpoint: cannot start an ensemble"):
         tiny_config("multi_agent", init_checkpoint="x.pt",
-                    pretrain={"days": 1, "epochs": 1, "batch_size": 64, "learning_rate": 1e-3})
+                    pretrain={"days": 1, "epochs": 1, "batch_size": 64, "learning_rate": 1e-3},
+                    ensemble={"fits": 2})
     tiny_config("multi_agent", init_checkpoint="x.pt", warm_start_temperature=0.5)  # accepted
+
+
+def test_a_warm_start_goes_on_from_the_init_checkpoint(tmp_path):
+    """``init_checkpoint`` with a warm start: the checkpoint's actor drives the first round (the
+    teacher labels the states it visits) and is scored there; the fit starts from its weights."""
+    source = tmp_path / "source"
+    train(tiny_config("multi_agent", iterations=1), source, log=lambda *_: None, evaluate=False)
+    pretrain = {"days": 1, "day_steps": 40, "starts": 0, "epochs": 1, "batch_size": 64,
+                "learning_rate": 1e-9, "teacher": "dispatcher", "workers": 1}
+    cfg = tiny_config("multi_agent", iterations=1, critic_warmup_iterations=1,
+                      init_checkpoint=str(source / "model_0.pt"), pretrain=pretrain)
+    lines: list[str] = []
+    train(cfg, tmp_path / "run", log=lines.append, evaluate=False)
+    text = "\n".join(lines)
+    assert "the warm start goes on from" in text and "the starting policy scores" in text
+    assert "demonstrations: 1 days and 0 day starts of 120 steps (0 with low batteries), the actor drives" in text
+    start = torch.load(source / "model_0.pt", weights_only=True)["actor_state_dict"]
+    warm = torch.load(tmp_path / "run" / "model_warmstart.pt", weights_only=True)["actor_state_dict"]
+    # A learning rate of 1e-9: one pass leaves the fit where the checkpoint put it.
+    assert all(torch.allclose(warm[k], v, atol=1e-6) for k, v in start.items())
+    cold = tiny_config("multi_agent", iterations=1, critic_warmup_iterations=1, pretrain=pretrain)
+    lines.clear()
+    train(cold, tmp_path / "cold", log=lines.append, evaluate=False)
+    assert "the dispatcher drives" in "\n".join(lines)
