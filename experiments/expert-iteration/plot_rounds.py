@@ -19,7 +19,8 @@ ROUNDS = {"shipped (round 0's driver)": "gcn",
           "fit 0": "runs/ei_paper_s0/model_fit0.pt",
           "fit 1": "runs/ei_paper_s0/model_fit1.pt",
           "fit 2": "runs/ei_paper_s0/model_fit2.pt",
-          "round 3": "runs/ei_paper_leg2/model_round3.pt"}
+          "fit 3": "runs/ei_r4/model_fit3.pt",
+          "round 3, own labels": "runs/ei_paper_leg2/model_round3.pt"}
 CASES = {"paper": "case 1", "paper_uncertain": "case 2", "paper_uncertain_10": "10 %"}
 
 
