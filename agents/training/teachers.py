@@ -20,7 +20,7 @@
   unless the rollouts (the dispatcher flying, the config's gusts and failures, common random
   numbers) hand the decision to the dispatcher. Each round's teacher is built on that round's
   learner, so a better policy makes a better teacher (expert iteration); without a learner
-  (behaviour cloning with no ``start_checkpoint``) the dispatcher proposes. See
+  (behaviour cloning with no ``init_checkpoint``) the dispatcher proposes. See
   :class:`LookaheadTeacher` for what a decision weighs.
 - ``dispatcher``: the expert dispatcher itself.
 

@@ -1,8 +1,6 @@
 """The look-ahead teacher (pretrain.teacher: lookahead): the learned ATC's look-ahead around the
 learner labels each decision with what it takes, weighted by its reward contest or as forced."""
 
-import pytest
-
 from agents.controllers.dispatcher import DispatcherController
 from agents.controllers.gcn import GCNController, read_checkpoint
 from agents.controllers.search import LOSS_COST
