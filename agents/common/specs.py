@@ -100,14 +100,16 @@ def rllib_module_state(folder: str | Path, module_id: str | None = None) -> Path
     return found[0]
 
 
-#: Built-in controllers that play the checkpoint their ``proposer`` names, and their default
-#: proposer (``None``: a rule, which plays none).
-CHECKPOINT_PROPOSERS = {"lookahead": "gcn", "guard": None}
+#: Built-in controllers that play the checkpoint one of their arguments names: the argument and
+#: its default (``None``: a rule, which plays none).
+CHECKPOINT_PROPOSERS = {"lookahead": ("proposer", "gcn"), "guard": ("proposer", None),
+                        "prior": ("policy", "gcn")}
 
 
 def checkpoint_files(spec: str) -> list[Path]:
     """The checkpoint files an agent spec plays (``gcn``, a ``.pt`` path, checkpoints joined
-    by ``+``, or a look-ahead around one: ``lookahead``, ``guard[proposer=...]``; a policy of
+    by ``+``, a look-ahead around one: ``lookahead``, ``guard[proposer=...]``, or one with a
+    rule as its prior: ``prior[policy=...]``; a policy of
     another library: its ``.zip``, its ``.pt2``, its RLlib module's weights); none for any
     other agent. Names from before 0.2.0 are read as their new names."""
     spec = canonical_spec(spec, note=False)
@@ -116,7 +118,8 @@ def checkpoint_files(spec: str) -> list[Path]:
     except AgentSpecError:
         target, kwargs = spec, {}
     if target in CHECKPOINT_PROPOSERS:
-        proposer = kwargs.get("proposer", CHECKPOINT_PROPOSERS[target])
+        key, default = CHECKPOINT_PROPOSERS[target]
+        proposer = kwargs.get(key, default)
         return checkpoint_files(proposer) if isinstance(proposer, str) else []
     parts = spec.split("+") if "+" in spec else [target]
     files = []

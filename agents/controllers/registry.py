@@ -3,7 +3,8 @@ expert rule), ``planner`` (a one-step look-ahead planner, which reads the simula
 (a proposer, the dispatcher by default, whose choices a look-ahead may veto to lose fewer
 vehicles), ``gcn`` (the shipped trained policy, from the observation alone), ``lookahead``
 (the learned ATC as shipped: a look-ahead search around a proposer, ``gcn`` by default),
-``package.module:Class`` or ``path/to/file.py:Class`` (a class, or a ready object; modules and
+``prior`` (a policy, ``gcn`` by default, with a rule, the dispatcher by default, as its prior:
+:mod:`agents.controllers.prior`), ``package.module:Class`` or ``path/to/file.py:Class`` (a class, or a ready object; modules and
 files resolve from the working directory, as under ``python -m``), the path of a training
 checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
 :class:`agents.controllers.gcn.GCNEnsemble`), a policy trained in another library
@@ -40,6 +41,7 @@ BUILTIN = {
     "planner": "agents.controllers.planner:PlannerController",
     "guard": "agents.controllers.guard:GuardController",
     "lookahead": "agents.controllers.lookahead:LookaheadController",
+    "prior": "agents.controllers.prior:RulePriorController",
 }
 
 #: Library -> the class of :mod:`agents.controllers.foreign` that plays its files.

@@ -77,6 +77,18 @@ class PretrainConfig:
     score of the full days it drove in the round after its fit (each fit on days of its own);
     ``paired``, the best by its score on the last round's full days, which every fit drives
     (the same days for all: more days driven, a fairer comparison); ``last``, the last fit."""
+    rule_weight: float = 0.0
+    """The dispatcher as the actor's prior (:mod:`agents.controllers.prior`): the actor drives,
+    proposes to a ``lookahead`` teacher and is fit as ``log pi(a) + rule_weight * [a is the
+    dispatcher's choice]``, so it learns where to depart from the rule rather than the rule
+    itself; play the result as ``prior[policy=<checkpoint>]`` (which reads this weight from
+    it). 0: the actor alone. PPO does not train such an actor: every PPO iteration must be a
+    critic warm-up."""
+
+    @property
+    def runs(self) -> bool:
+        """Whether the warm start runs (``days`` and ``epochs`` > 0)."""
+        return self.days > 0 and self.epochs > 0
 
     @classmethod
     def upgrade_data(cls, data: dict) -> dict:
@@ -254,13 +266,13 @@ class TrainConfig:
             (self.warm_start_temperature > 0 and math.isfinite(self.warm_start_temperature),
              "warm_start_temperature", "must be a finite number > 0"),
             (self.warm_start_temperature == 1.0 or bool(self.init_checkpoint)
-             or (self.pretrain.days > 0 and self.pretrain.epochs > 0), "warm_start_temperature",
+             or self.pretrain.runs, "warm_start_temperature",
              "sharpens the warm start: it needs pretrain.days and pretrain.epochs > 0, or an "
              "init_checkpoint"),
             (not self.init_checkpoint or self.ensemble.fits == 0,
              "init_checkpoint", "cannot start an ensemble's warm start: it needs ensemble.fits: 0"),
             (self.ensemble.fits >= 0, "ensemble.fits", "must be >= 0"),
-            (self.ensemble.fits == 0 or (self.pretrain.days > 0 and self.pretrain.epochs > 0),
+            (self.ensemble.fits == 0 or self.pretrain.runs,
              "ensemble.fits", "refits the warm start: it needs pretrain.days and pretrain.epochs > 0"),
             (self.ensemble.days >= 1 and self.ensemble.epochs >= 1 and self.ensemble.batch_size >= 1,
              "ensemble", "days, epochs and batch_size must be >= 1"),
@@ -283,6 +295,14 @@ class TrainConfig:
             (len(self.pretrain.low_battery_pct) > 0
              and all(0.0 < b <= 100.0 for b in self.pretrain.low_battery_pct),
              "pretrain.low_battery_pct", "a non-empty list of levels in (0, 100]"),
+            (self.pretrain.rule_weight >= 0 and math.isfinite(self.pretrain.rule_weight),
+             "pretrain.rule_weight", "must be a finite number of nats >= 0"),
+            (self.pretrain.rule_weight == 0 or (self.pretrain.runs and self.ensemble.fits == 0),
+             "pretrain.rule_weight", "weighs the warm start's actor against the dispatcher: it "
+             "needs pretrain.days and pretrain.epochs > 0 and ensemble.fits: 0"),
+            (self.pretrain.rule_weight == 0 or self.iterations <= self.critic_warmup_iterations,
+             "pretrain.rule_weight", "PPO does not train an actor with the dispatcher as its "
+             "prior: set critic_warmup_iterations >= iterations (the actor frozen)"),
             (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
             (self.lost_vehicle_penalty >= 0, "lost_vehicle_penalty", "must be >= 0"),
             (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),

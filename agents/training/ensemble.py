@@ -32,7 +32,8 @@ import torch
 
 from agents.common.seeds import ENSEMBLE_SEED_BASE, training_seed
 from agents.execution import Backend, LocalBackend
-from agents.training.imitation import DemonstrationLog, _learner, collect, fit_actor, to_tensordict
+from agents.training.demonstrations import DemonstrationLog, collect
+from agents.training.imitation import _learner, fit_actor, to_tensordict
 
 #: Offset of the refits' seeds: refit ``k`` draws its weights and batches with ``REFIT_SEED_BASE + k``.
 REFIT_SEED_BASE = 1000

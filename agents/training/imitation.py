@@ -1,26 +1,18 @@
 """Warm start of the shared GCN actor by imitation: behaviour cloning of a teacher, then DAgger.
 
-The teachers (``pretrain.teacher``) are those of :mod:`agents.training.teachers`.
-
-Days of demonstrations run as tasks of the execution layer (:mod:`agents.execution`: local
-worker processes or a Ray cluster), one day per task, through the Gymnasium env:
-the acting eVTOL's observation there is exactly what that eVTOL observes as an AEC agent, so
-the same data trains the actor of both training modes. Each round runs ``days`` full days,
-``starts`` shorter episodes of a day's first ``start_steps`` steps and ``low_battery_starts``
-such episodes with every battery starting low; in the day starts a share ``noise`` of the
-driver's actions is replaced by random legal ones (see :func:`round_tasks`). Only steps with a choice
-(two or more legal actions) are kept: the others teach nothing. In round 0 the teacher drives;
-in each DAgger round the current actor drives (greedily) and the teacher labels the states the
-actor visits, and the actor is refit on everything collected so far. A last round of full days
-driven by the last fit scores it (with ``pretrain.keep: paired``, every fit drives the same
-days); nothing is fit on it, so no teacher runs there.
+The teachers (``pretrain.teacher``) are those of :mod:`agents.training.teachers`; the days they
+label, and who drives them, are those of :mod:`agents.training.demonstrations`. In round 0 the
+teacher drives (or the ``init_checkpoint``'s actor); in each DAgger round the current actor
+drives (greedily) and the teacher labels the states the actor visits, and the actor is refit on
+everything collected so far. A last round of full days driven by the last fit scores it (with
+``pretrain.keep: paired``, every fit drives the same days); nothing is fit on it, so no teacher
+runs there.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -29,192 +21,11 @@ import torch
 from tensordict import TensorDict
 
 from agents.common.files import write_torch_atomic
-from agents.execution import INTERRUPTED, Backend, LocalBackend
-from agents.gcn.features import POLICY_GROUPS
-from agents.gcn.padding import pad_observation, to_padded_action
+from agents.execution import Backend, LocalBackend
 from agents.gcn.padding import to_tensordict as padded_tensordict
-from agents.common.seeds import WARM_START_SEED_BASE, training_seed
+from agents.training.demonstrations import ACTOR_GROUPS, collect, round_tasks
 from agents.training.fit_selection import kept_fit, mean_day_score
-from agents.training.teachers import PLANNER_OPTIONS, make_teacher
 from marl_vertiport.sim.metrics import TRAINING_METRICS
-
-#: Observation groups the actor reads (the first three are its features, the last its mask).
-ACTOR_GROUPS = (*POLICY_GROUPS, "action_mask")
-
-
-@dataclass(frozen=True)
-class DayTask:
-    """One day of demonstrations: who drives, who labels."""
-
-    env_config: dict[str, Any]
-    seed: int
-    steps: int
-    teacher: str
-    planner_horizon: int
-    planner_margin: float = 0.0
-    planner_options: dict[str, Any] = dataclasses.field(default_factory=dict)
-    """Options of the planner of a planner teacher
-    (:data:`~agents.training.teachers.PLANNER_OPTIONS`)."""
-    learner: dict[str, Any] | None = None
-    """Checkpoint content of the actor that drives (DAgger); ``None``: the teacher drives."""
-    noise: float = 0.0
-    """Probability that the driver's action at a step with a choice is replaced by a random
-    legal one (drawn from a generator seeded by ``seed``); labels are unaffected."""
-    labelled: bool = True
-    """Whether the teacher labels the decisions; ``False`` (a day that only scores the learner
-    that drives it): no teacher runs and no decisions are returned."""
-
-
-class DemonstrationLog:
-    """The demonstrations of a day: the decisions with a choice (two or more legal actions): each observation's
-    groups, its label and its weight; as arrays by :meth:`arrays`."""
-
-    def __init__(self) -> None:
-        self.rows: dict[str, list[np.ndarray]] = {k: [] for k in ACTOR_GROUPS}
-        self.labels: list[int] = []
-        self.weights: list[float] = []
-        self.first: dict[str, np.ndarray] | None = None
-
-    def see(self, obs: dict) -> None:
-        """Note the shapes of a day's observations (so an empty log still has them)."""
-        if self.first is None:
-            self.first = {**obs["observation"], "action_mask": obs["action_mask"]}
-
-    def add(self, obs: dict, label: int, weight: float) -> None:
-        for key in ACTOR_GROUPS[:3]:
-            self.rows[key].append(obs["observation"][key])
-        self.rows["action_mask"].append(obs["action_mask"])
-        self.labels.append(label)
-        self.weights.append(weight)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """``port_nodes (T, P, 4)``, ``evtol_nodes (T, N, 13)``, ``self (T, 11)``,
-        ``action_mask (T, A)``, ``label (T,)`` and ``regret (T,)`` of the ``T`` decisions."""
-        first = self.first or {}
-        data = {k: np.stack(v) if v else np.empty((0, *np.shape(first[k])), np.asarray(first[k]).dtype)
-                for k, v in self.rows.items()}
-        data["label"] = np.asarray(self.labels, dtype=np.int64)
-        data["regret"] = np.asarray(self.weights, dtype=np.float32)
-        return data
-
-
-class Demonstrator:
-    """The driver of a demonstration day, as a controller of the episode loop: at a step with a
-    choice the teacher labels the state (and the decision is logged with what a wrong choice
-    costs, see :func:`label_weights`), then the learner acts if there is one, else the teacher's
-    label is taken; in the day starts a share ``noise`` of the actions is replaced by a random
-    legal one. A step without a choice takes its one legal action. The teacher is bound to the
-    simulator at the start of the day; it keeps the seed it was made with."""
-
-    def __init__(self, teacher: Any, learner: Any, noise: float, noise_rng: np.random.Generator,
-                 log: DemonstrationLog) -> None:
-        self.teacher, self.learner, self.noise, self.noise_rng = teacher, learner, noise, noise_rng
-        self.log = log
-        self.label = 0
-
-    def bind(self, sim: Any) -> None:
-        if hasattr(self.teacher, "bind"):
-            self.teacher.bind(sim)
-
-    def act(self, obs: dict) -> int:
-        teacher, log = self.teacher, self.log
-        log.see(obs)
-        mask = obs["action_mask"]
-        choice = int(mask.sum()) > 1
-        if not choice:
-            self.label = int(np.argmax(mask))
-        elif teacher is not None:
-            self.label = int(teacher.act(obs))
-            q = getattr(teacher, "last_q", None)
-            # What a wrong choice here can cost: the spread of the simulated candidates' values,
-            # or without bound where the teacher ruled an action out as unsafe.
-            if getattr(teacher, "last_forced", False):
-                weight = float("inf")
-            else:
-                weight = max(q.values()) - min(q.values()) if q and len(q) > 1 else 0.0
-            log.add(obs, self.label, weight)
-        action = self.learner.act(obs) if self.learner is not None and choice else self.label
-        if choice and self.noise > 0.0 and self.noise_rng.random() < self.noise:
-            action = int(self.noise_rng.choice(np.flatnonzero(mask)))
-        return action
-
-
-def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Run one day (:class:`Demonstrator` through the episode loop, the single-agent env);
-    return the observations of the steps with a choice, the teacher's label of each (``label``,
-    shape ``(T,)``), and the metrics of the day (so far, for a partial day)."""
-    from agents.controllers.episode import run_episode
-    from agents.controllers.gcn import GCNController
-    from marl_vertiport.config import from_dict
-    from marl_vertiport.gym_env import VertiportEnv
-
-    torch.set_num_threads(1)
-    if not task.labelled and task.learner is None:
-        raise ValueError("a day without labels needs a learner to drive it")
-    env = VertiportEnv(config=from_dict(task.env_config))
-    teacher = (make_teacher(task.teacher, task.planner_horizon, task.planner_margin, task.seed,
-                            learner=task.learner, **task.planner_options)
-               if task.labelled else None)
-    learner = GCNController(task.learner) if task.learner is not None else None
-    log = DemonstrationLog()
-    driver = Demonstrator(teacher, learner, task.noise, np.random.default_rng([task.seed, 1]), log)
-    metrics = run_episode(env, driver, task.seed, max_steps=task.steps)
-    env.close()
-    if hasattr(teacher, "close"):
-        teacher.close()
-    return log.arrays(), metrics
-
-
-def pad_day(data: dict[str, np.ndarray], max_nodes: int, max_evtols: int) -> dict[str, np.ndarray]:
-    """A day's decisions padded to ``max_nodes`` vertiport nodes and ``max_evtols`` eVTOLs
-    (agents/gcn/padding.py), labels moved to the padded action space."""
-    n_nodes = data["port_nodes"].shape[1]
-    out = pad_observation({k: data[k] for k in ACTOR_GROUPS}, max_nodes, max_evtols)
-    out["label"] = np.asarray(to_padded_action(data["label"], n_nodes, max_nodes), dtype=np.int64)
-    out["regret"] = data["regret"]
-    return out
-
-
-def collect(tasks: list[DayTask], backend: Backend | int, log: Callable[[str], None], tag: str,
-            sizes: tuple[int, int] | None = None, run_day: Callable = label_day,
-            ) -> tuple[dict[str, np.ndarray], list[dict[str, Any]]]:
-    """Run ``tasks`` on ``backend`` (:mod:`agents.execution`; an int: that many local worker
-    processes, 1 in this process), logging each day; returns their decisions concatenated in
-    task order and each task's metrics, the same on any backend. ``sizes``: ``(max_nodes,
-    max_evtols)`` to pad every day to (days of different vertiports). ``run_day(task)`` runs
-    one task and returns its decisions (with ``label``) and metrics (default :func:`label_day`).
-
-    Raises:
-        KeyboardInterrupt: Ctrl-C stopped the round (nothing of it is kept).
-        RuntimeError: a day failed, or a worker or node was lost for good.
-    """
-    if isinstance(backend, int):
-        backend = LocalBackend(backend)
-    start = time.time()
-    results: dict[int, tuple[dict[str, np.ndarray], dict[str, Any]]] = {}
-
-    def report(i: int, result) -> bool:
-        results[i] = result
-        m = result[1]
-        log(f"  {tag}: episode {len(results)}/{len(tasks)} done ({time.time() - start:.0f} s): "
-            f"{m.get('steps', 0)} steps, reward {m.get('total_reward', float('nan')):.0f}, "
-            f"lost {m.get('stranded_air', 0)} air / {m.get('stranded_ground', 0)} ground, "
-            f"{len(result[0]['label'])} decisions")
-        return True
-
-    problem = backend.run(run_day, tasks, report)
-    if problem == INTERRUPTED:
-        raise KeyboardInterrupt
-    if problem is not None:
-        raise RuntimeError(f"{tag}: {problem}")
-    # In task order, not finishing order: the fit's data, and so the run, do not depend on
-    # which worker finished first.
-    ordered = [results[i] for i in range(len(tasks))]
-    days = [r[0] for r in ordered]
-    if sizes is not None:
-        days = [pad_day(d, *sizes) for d in days]
-    data = {k: np.concatenate([d[k] for d in days]) for k in days[0]}
-    return data, [r[1] for r in ordered]
 
 
 def to_tensordict(data: dict[str, np.ndarray]) -> TensorDict:
@@ -235,14 +46,23 @@ def label_weights(regret: np.ndarray, cap: float) -> np.ndarray:
 
 def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, learning_rate: float,
               seed: int, log: Callable[[str], None], tag: str, regret_cap: float = 0.0,
-              soft_targets: torch.Tensor | None = None) -> dict[str, float]:
+              soft_targets: torch.Tensor | None = None, rule_weight: float = 0.0) -> dict[str, float]:
     """Cross-entropy of the actor's masked softmax on the teacher's labels, each decision
     weighted by :func:`label_weights` (``regret_cap`` 0: all weights 1). ``soft_targets``
     (``(N, A)`` probabilities): the cross-entropy to these instead (distillation), accuracy
-    counted against their most likely action."""
+    counted against their most likely action. ``rule_weight`` > 0: the softmax is that of the
+    logits plus ``rule_weight`` on the rule's choice (``data["rule"]``), the policy that
+    :class:`~agents.controllers.prior.RulePriorController` plays, so the actor learns where to
+    depart from the rule."""
     from agents.gcn.distribution import masked_logits
 
     obs = to_tensordict(data)
+    bonus = None
+    if rule_weight > 0:
+        if "rule" not in data:
+            raise ValueError("rule_weight needs the rule's choice of every decision (data['rule'])")
+        bonus = rule_weight * torch.nn.functional.one_hot(
+            torch.from_numpy(data["rule"]), obs["action_mask"].shape[-1]).float()
     target = (torch.from_numpy(data["label"]) if soft_targets is None
               else soft_targets.argmax(-1))
     weight = torch.from_numpy(label_weights(data["regret"], regret_cap)).float()
@@ -257,7 +77,10 @@ def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, 
         for i in range(0, n, batch_size):
             idx = perm[i:i + batch_size]
             batch = obs[idx]
-            logp = torch.log_softmax(masked_logits(actor.logits(batch), batch["action_mask"]), dim=-1)
+            logits = masked_logits(actor.logits(batch), batch["action_mask"])
+            if bonus is not None:
+                logits = logits + bonus[idx]
+            logp = torch.log_softmax(logits, dim=-1)
             w = weight[idx]
             if soft_targets is None:
                 ce = -(logp.gather(-1, target[idx].unsqueeze(-1)).squeeze(-1) * w).sum() / w.sum()
@@ -275,11 +98,6 @@ def fit_actor(actor, data: dict[str, np.ndarray], epochs: int, batch_size: int, 
     return stats
 
 
-def _with_battery(env_config: dict[str, Any], pct: float) -> dict[str, Any]:
-    """``env_config`` with every battery starting at ``pct`` %."""
-    return {**env_config, "battery": {**env_config.get("battery", {}), "initial_pct": float(pct)}}
-
-
 def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
     """The actor's weights as checkpoint content a worker can load (see GCNController)."""
     from agents.gcn.features import feature_names
@@ -289,37 +107,6 @@ def _learner(actor, env_config: dict[str, Any], cfg) -> dict[str, Any]:
     return {"actor_state_dict": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()},
             "infos": {"marl_vertiport": {"env_config": first, "train_config": to_dict(cfg),
                                          "feature_schema": feature_names("observation")}}}
-
-
-def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: int,
-                learner: dict[str, Any] | None, last: bool) -> list[DayTask]:
-    """The episodes of warm-start round ``round_`` (``last``: the round that only scores the
-    last fit, full days alone). With a list of env configs (scenarios), episode ``d`` of each
-    kind runs config ``d mod len(list)``.
-
-    Seeds of their own, in the training range (agents/common/seeds.py), new in every round: ``pretrain.days`` full days, then ``starts`` day starts (the start of a day, all
-    batteries full and every vehicle placed at random, is where an imitation's early error
-    costs most), then ``low_battery_starts`` day starts with every battery at the levels of
-    ``low_battery_pct`` in turn (a fleet that cannot all be charged in time shows the teacher's
-    triage, which its own days rarely reach). Random actions (``noise``) go into the day starts
-    only: the full days score the fits as they are."""
-    pre = cfg.pretrain
-    scenarios = env_config if isinstance(env_config, list) else [env_config]
-    base = WARM_START_SEED_BASE + cfg.seed * 1000 + round_ * 100
-    n_starts = 0 if last else pre.starts
-    lengths = [pre.day_steps] * pre.days + [pre.start_steps] * n_starts
-    configs = ([scenarios[d % len(scenarios)] for d in range(pre.days)]
-               + [scenarios[d % len(scenarios)] for d in range(n_starts)])
-    if not last:
-        levels = [pre.low_battery_pct[i % len(pre.low_battery_pct)]
-                  for i in range(pre.low_battery_starts)]
-        lengths += [pre.start_steps] * len(levels)
-        configs += [_with_battery(scenarios[i % len(scenarios)], pct) for i, pct in enumerate(levels)]
-    options = {k: True for k in PLANNER_OPTIONS if getattr(pre, f"planner_{k}")}
-    return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.planner_horizon,
-                    pre.planner_margin, options, learner, pre.noise if d >= pre.days else 0.0,
-                    labelled=not last)
-            for d, (conf, steps) in enumerate(zip(configs, lengths))]
 
 
 #: Day metrics averaged per warm-start round for the learning curve (``warmstart.csv``).
@@ -365,11 +152,13 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     ``backend``: where the days run (default: ``pretrain.workers`` local processes); the
     result does not depend on it."""
     pre = cfg.pretrain
-    if pre.days <= 0 or pre.epochs <= 0:
+    if not pre.runs:
         return {}
     # What the saved progress must have been made with to be continued.
     # (Not the worker count: the data does not depend on it.)
-    made_with = {"pretrain": {k: v for k, v in dataclasses.asdict(pre).items() if k != "workers"},
+    # (Nor a rule weight of 0, the default: states saved before it existed go on.)
+    made_with = {"pretrain": {k: v for k, v in dataclasses.asdict(pre).items()
+                              if k != "workers" and (k != "rule_weight" or v)},
                  "seed": cfg.seed, "env_config": env_config, "model": dataclasses.asdict(cfg.model),
                  "lost_vehicle_penalty": cfg.lost_vehicle_penalty,
                  **({"init_checkpoint": cfg.init_checkpoint} if cfg.init_checkpoint else {})}
@@ -403,9 +192,11 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                f"scoring the {len(drivers)} fits on the same days" if last else
                "demonstrations" if round_ == 0 else f"DAgger round {round_}")
         per_driver = len(tasks) // len(drivers)
+        prior = (f" with the dispatcher as its prior (weight {pre.rule_weight:g})"
+                 if learner is not None and pre.rule_weight else "")
         log(f"{tag}: {pre.days} days and {per_driver - pre.days} day starts of {pre.start_steps} "
             f"steps ({0 if last else pre.low_battery_starts} with low batteries), "
-            f"{'the ' + pre.teacher if learner is None else 'the actor'} drives"
+            f"{'the ' + pre.teacher if learner is None else 'the actor'} drives{prior}"
             f"{f' ({pre.noise:.0%} random actions in the starts)' if pre.noise and not last else ''}, "
             f"{'no labels' if last else f'the {pre.teacher} teacher labels'} "
             f"({where})")
@@ -446,7 +237,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
             actor.to("cpu")
             epochs = pre.dagger_epochs if round_ and pre.dagger_epochs else pre.epochs
             stats.update(fit_actor(actor, state["data"], epochs, pre.batch_size,
-                                   pre.learning_rate, cfg.seed + round_, log, tag, pre.regret_cap))
+                                   pre.learning_rate, cfg.seed + round_, log, tag, pre.regret_cap,
+                                   rule_weight=pre.rule_weight))
             actor.to(actor_device)
             fits.append(_learner(actor, env_config, cfg))
             record.update(cross_entropy=stats["cross_entropy"], accuracy=stats["accuracy"])

@@ -77,7 +77,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
         runner.current_learning_iteration += 1
         curves = [r for r in curves if r["iteration"] < runner.current_learning_iteration]
         log(f"resuming {run_dir} from {ckpt.name} at iteration {runner.current_learning_iteration}")
-    elif cfg.init_checkpoint and not (cfg.pretrain.days > 0 and cfg.pretrain.epochs > 0):
+    elif cfg.init_checkpoint and not cfg.pretrain.runs:
         warm_rows, curves = [], []
         init_stage(runner, cfg, run_dir, log)
     else:

@@ -39,11 +39,13 @@ PLANNER_OPTIONS = ("expect_failures", "rescue")
 
 
 def make_teacher(name: str, planner_horizon: int, planner_margin: float, seed: int,
-                 learner: dict[str, Any] | None = None, **planner_options: Any):
+                 learner: dict[str, Any] | None = None, rule_weight: float = 0.0,
+                 **planner_options: Any):
     """The teacher ``name`` (a name from before 0.2.0 is read as its new name, with a note);
     ``planner_options`` (of :data:`PLANNER_OPTIONS`) go to the planner of ``planner`` and
     ``guarded_planner``; ``learner`` (checkpoint content, the actor being fit) is the proposer
-    of ``lookahead`` (``None``: the dispatcher)."""
+    of ``lookahead`` (``None``: the dispatcher), with the dispatcher as its prior at
+    ``rule_weight`` > 0 (:mod:`agents.controllers.prior`)."""
     from agents.common.names import RENAMED_TEACHERS, note_renamed
     from agents.controllers.dispatcher import DispatcherController
     from agents.controllers.planner import PlannerController
@@ -57,7 +59,7 @@ def make_teacher(name: str, planner_horizon: int, planner_margin: float, seed: i
     if name == "dispatcher":
         return DispatcherController()
     if name == "lookahead":
-        return LookaheadTeacher(learner, seed)
+        return LookaheadTeacher(learner, seed, rule_weight)
     if name == "search":
         from agents.controllers.guard import GuardController
         from agents.controllers.lookahead_settings import LookaheadSettings
@@ -87,14 +89,19 @@ class LookaheadTeacher:
     :data:`~agents.controllers.search.LOSS_COST` per vehicle lost, are :attr:`last_q`; where it
     left the learner's choice for safety (that choice lost a vehicle or brought a charge under
     the margin, or the vehicle is below ``defer_pct``), the decision is :attr:`last_forced` and
-    weighs the most. Elsewhere the learner's choice stands and is its label, at weight 1."""
+    weighs the most. Elsewhere the learner's choice stands and is its label, at weight 1. With
+    ``rule_weight`` > 0 the learner proposes with the dispatcher as its prior
+    (:class:`~agents.controllers.prior.RulePriorController`)."""
 
-    def __init__(self, learner: dict[str, Any] | None, seed: int) -> None:
+    def __init__(self, learner: dict[str, Any] | None, seed: int, rule_weight: float = 0.0) -> None:
         from agents.controllers.dispatcher import DispatcherController
         from agents.controllers.gcn import GCNController
         from agents.controllers.lookahead import LookaheadController
+        from agents.controllers.prior import RulePriorController
 
         proposer = DispatcherController() if learner is None else GCNController(learner)
+        if learner is not None and rule_weight > 0:
+            proposer = RulePriorController(proposer, DispatcherController(), rule_weight)
         #: The look-ahead that decides.
         self.look = LookaheadController(proposer=proposer, rollout_policy=DispatcherController(),
                                         seed=seed)

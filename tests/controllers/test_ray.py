@@ -74,7 +74,7 @@ class TestLocalRayInstance:
         assert backend.describe() == "ray: 1 node, 2 CPUs"
 
     def test_warm_start_days_are_the_same_on_ray(self, backend):
-        from agents.training.imitation import DayTask, collect
+        from agents.training.demonstrations import DayTask, collect
         from marl_vertiport.config import load_config, to_dict
 
         env_cfg = to_dict(load_config("paper"))

@@ -77,7 +77,7 @@ def test_ensemble_targets_are_the_normalised_geometric_mean_on_legal_actions():
 def test_refit_actor_leaves_the_warm_start_alone():
     from agents.controllers.registry import SHIPPED_CHECKPOINT
     from agents.training.ensemble import refit_actor
-    from agents.training.imitation import ACTOR_GROUPS
+    from agents.training.demonstrations import ACTOR_GROUPS
 
     actor = GCNController(SHIPPED_CHECKPOINT).actor
     before = {k: v.clone() for k, v in actor.state_dict().items()}

@@ -7,7 +7,8 @@ import torch
 
 from agents.training.config import TrainConfig
 from agents.training.fit_selection import day_score, kept_fit
-from agents.training.imitation import label_day, load_warm_start_state, round_tasks, warm_start
+from agents.training.demonstrations import label_day, round_tasks
+from agents.training.imitation import load_warm_start_state, warm_start
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 
 from helpers import small_actor

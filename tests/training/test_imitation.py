@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import torch
 
-from agents.training.imitation import (
-    DayTask, _learner, _with_battery, collect, fit_actor, label_day, label_weights, make_teacher,
-    round_tasks,
+from agents.training.demonstrations import (
+    DayTask, _with_battery, collect, label_day, make_teacher, round_tasks,
 )
+from agents.training.imitation import _learner, fit_actor, label_weights
 from agents.training.config import TrainConfig
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict
 from marl_vertiport.vertiport_v1 import raw_env
@@ -75,12 +75,12 @@ def test_fit_then_learner_drives_a_dagger_day():
 
 
 def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatch):
-    import agents.training.imitation as imitation
+    import agents.training.demonstrations as demonstrations
 
     env_cfg = to_dict(load_config("paper"))
     clean, _ = label_day(DayTask(env_cfg, 5, 60, "dispatcher", 4))
     chosen: list[int] = []
-    original = imitation.make_teacher
+    original = demonstrations.make_teacher
 
     def recording_teacher(*args, **kwargs):
         teacher = original(*args, **kwargs)
@@ -88,9 +88,9 @@ def test_noise_changes_the_path_not_the_labels_and_low_battery_starts(monkeypatc
         teacher.act = lambda obs: chosen.append(int(act(obs))) or chosen[-1]
         return teacher
 
-    monkeypatch.setattr(imitation, "make_teacher", recording_teacher)
+    monkeypatch.setattr(demonstrations, "make_teacher", recording_teacher)
     noisy, _ = label_day(DayTask(env_cfg, 5, 60, "dispatcher", 4, noise=0.5))
-    monkeypatch.setattr(imitation, "make_teacher", original)
+    monkeypatch.setattr(demonstrations, "make_teacher", original)
     again, _ = label_day(DayTask(env_cfg, 5, 60, "dispatcher", 4, noise=0.5))
     # Random actions take the day elsewhere; the same seed draws the same ones.
     assert not np.array_equal(clean["evtol_nodes"][:20], noisy["evtol_nodes"][:20])
@@ -122,7 +122,7 @@ def test_collect_gives_the_same_data_on_one_or_two_workers():
 
 
 def test_round_tasks_mix_seeds_noise_and_low_batteries():
-    from agents.training.imitation import round_tasks
+    from agents.training.demonstrations import round_tasks
 
     cfg = TrainConfig(pretrain=build_dataclass(type(TrainConfig().pretrain), {
         "days": 2, "starts": 3, "low_battery_starts": 5, "low_battery_pct": [10, 30],

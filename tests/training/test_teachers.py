@@ -61,18 +61,18 @@ def test_the_lookahead_teacher_weighs_contests_by_their_values_and_overrides_as_
 def test_each_days_teacher_receives_the_learner_that_drives_it(monkeypatch):
     """The teacher of a DAgger day is built on that day's learner (expert iteration: a better
     actor makes a better teacher); a day the teacher drives gives it none."""
-    import agents.training.imitation as imitation
-    from agents.training.imitation import DayTask, label_day
+    import agents.training.demonstrations as demonstrations
+    from agents.training.demonstrations import DayTask, label_day
     from marl_vertiport.config import load_config, to_dict
 
     given = []
-    original = imitation.make_teacher
+    original = demonstrations.make_teacher
 
     def recording(*args, **kwargs):
         given.append(kwargs.get("learner"))
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(imitation, "make_teacher", recording)
+    monkeypatch.setattr(demonstrations, "make_teacher", recording)
     learner = read_checkpoint(SHIPPED)
     env_cfg = to_dict(load_config("paper"))
     label_day(DayTask(env_cfg, 3, 20, "dispatcher", 4, learner=learner))

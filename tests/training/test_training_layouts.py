@@ -197,7 +197,8 @@ def test_every_train_config_loads_and_the_sharpened_stage_keeps_the_warm_start()
 
     files = sorted(TRAIN_CONFIG_DIR.rglob("*.yaml"))
     assert [p.relative_to(TRAIN_CONFIG_DIR).as_posix() for p in files] == [
-        "default.yaml", "expert_iteration.yaml", "ppo_stage/long.yaml", "scratch.yaml"]
+        "default.yaml", "expert_iteration.yaml", "expert_iteration_prior.yaml",
+        "ppo_stage/long.yaml", "scratch.yaml"]
     for path in files:
         assert load_train_config(path).rules == 1  # configs/train/ runs under today's rules
     for name, path in MOVED_TRAIN_CONFIGS.items():
