@@ -136,10 +136,11 @@ class RulePriorController(Controller):
 
     def act(self, observation: dict) -> int:
         mask = np.asarray(observation["action_mask"])
-        if self.pure_act and int(mask.sum()) == 1:
+        legal = int(mask.sum())
+        if self.pure_act and legal == 1:
             return int(np.flatnonzero(mask)[0])
         best = int(np.argmax(self.scores(observation)))
-        if int(mask.sum()) > 1:
+        if legal > 1:
             self.decisions += 1
             self.departures += int(best != self.last_rule)
         return best

@@ -4,8 +4,9 @@ expert rule), ``planner`` (a one-step look-ahead planner, which reads the simula
 vehicles), ``gcn`` (the shipped trained policy, from the observation alone), ``lookahead``
 (the learned ATC as shipped: a look-ahead search around a proposer, ``gcn`` by default),
 ``prior`` (a policy, ``gcn`` by default, with a rule, the dispatcher by default, as its prior:
-:mod:`agents.controllers.prior`), ``package.module:Class`` or ``path/to/file.py:Class`` (a class, or a ready object; modules and
-files resolve from the working directory, as under ``python -m``), the path of a training
+:mod:`agents.controllers.prior`), ``package.module:Class`` or ``path/to/file.py:Class`` (a
+class, or a ready object; modules and files resolve from the working directory, as under
+``python -m``), the path of a training
 checkpoint (``.pt``), or checkpoints joined by ``+`` (their ensemble,
 :class:`agents.controllers.gcn.GCNEnsemble`), a policy trained in another library
 (:mod:`agents.controllers.foreign`): a Stable-Baselines3 ``model.zip``, a ``torch.export``

@@ -91,7 +91,8 @@ class DemonstrationLog:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """``port_nodes (T, P, 4)``, ``evtol_nodes (T, N, 13)``, ``self (T, 11)``,
-        ``action_mask (T, A)``, ``label (T,)`` and ``regret (T,)`` of the ``T`` decisions."""
+        ``action_mask (T, A)``, ``label (T,)`` and ``regret (T,)`` of the ``T`` decisions, and
+        ``rule (T,)`` for a log kept ``with_rule``."""
         first = self.first or {}
         data = {k: np.stack(v) if v else np.empty((0, *np.shape(first[k])), np.asarray(first[k]).dtype)
                 for k, v in self.rows.items()}
@@ -167,10 +168,12 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
                             learner=task.learner, rule_weight=task.rule_weight,
                             **task.planner_options)
                if task.labelled else None)
-    learner = GCNController(task.learner) if task.learner is not None else None
-    if learner is not None and task.rule_weight > 0:
-        learner = RulePriorController(learner, DispatcherController(), task.rule_weight)
+    # One dispatcher gives the day's rule: the choice logged and the learner's prior (it keeps
+    # no state between decisions, so the two may share it).
     rule = DispatcherController() if task.rule_weight > 0 else None
+    learner = GCNController(task.learner) if task.learner is not None else None
+    if learner is not None and rule is not None:
+        learner = RulePriorController(learner, rule, task.rule_weight)
     log = DemonstrationLog(with_rule=rule is not None)
     driver = Demonstrator(teacher, learner, task.noise, np.random.default_rng([task.seed, 1]), log,
                           rule)
