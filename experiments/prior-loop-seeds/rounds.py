@@ -47,25 +47,21 @@ def table(reward: pd.DataFrame, lost: pd.DataFrame) -> str:
                  + f" | {base.mean():.0f} | | "
                  + " / ".join(f"{lost['dispatcher'].loc[c].mean():.2f}" for c in CASES) + " |")
     for seed in (*SEEDS, "all"):
+        seeds = SEEDS if seed == "all" else (seed,)
+
+        def mean(frame: pd.DataFrame, stage: str) -> pd.Series:
+            return sum(frame[agent(stage, s)] for s in seeds) / len(seeds)
+
         for k, stage in enumerate(STAGES):
-            if seed == "all":
-                gains = sum(reward[agent(stage, s)] for s in SEEDS) / len(SEEDS) - base
-                step = (sum(reward[agent(stage, s)] - reward[agent(STAGES[k - 1], s)] for s in SEEDS)
-                        / len(SEEDS)) if k else None
-                lost_row = sum(lost[agent(stage, s)] for s in SEEDS) / len(SEEDS)
-                if stage == "start":
-                    continue
-            else:
-                if stage == "start" and seed != SEEDS[0]:
-                    continue
-                gains = reward[agent(stage, seed)] - base
-                step = reward[agent(stage, seed)] - reward[agent(STAGES[k - 1], seed)] if k else None
-                lost_row = lost[agent(stage, seed)]
+            if stage == "start" and seed != SEEDS[0]:  # the start is the same for every seed
+                continue
+            gains = mean(reward, stage) - base
+            step = mean(reward, stage) - mean(reward, STAGES[k - 1]) if k else None
             label = "" if stage == "start" else str(seed)
             cases = " | ".join(_cell(gains.loc[c]) for c in CASES)
             lines.append(f"| {label} | {stage} | {cases} | {_cell(gains)} | "
                          f"{_cell(step) if step is not None else ''} | "
-                         + " / ".join(f"{lost_row.loc[c].mean():.2f}" for c in CASES) + " |")
+                         + " / ".join(f"{mean(lost, stage).loc[c].mean():.2f}" for c in CASES) + " |")
     return "\n".join(lines)
 
 

@@ -52,7 +52,7 @@ class Recorder:
         chosen = int(self.controller.act(obs))
         if int(np.sum(obs["action_mask"])) > 1:
             self.decisions += 1
-            rule = int(self.controller.rule.act(obs))
+            rule = self.controller.last_rule  # the rule's choice the prior weighed
             if rule != chosen:
                 status = STATUS[int(obs["observation"]["self"][0])]
                 self.departures[(status, kind(self.names[rule]), kind(self.names[chosen]))] += 1
