@@ -102,15 +102,31 @@ class LocalBackend(Backend):
                     break
         except KeyboardInterrupt:
             problem = INTERRUPTED
+            under_way = sum(1 for f in futures if f.running())
+            if under_way:
+                print(f"Ctrl-C: waiting for the {under_way} task(s) under way to finish, to keep "
+                      "their results; Ctrl-C again stops them now", file=sys.stderr, flush=True)
         finally:
             for fut in futures:
                 fut.cancel()
-            pool.shutdown(wait=True, cancel_futures=True)
+            try:
+                pool.shutdown(wait=True, cancel_futures=True)
+            except KeyboardInterrupt:  # a second Ctrl-C: the tasks under way are dropped
+                problem = INTERRUPTED
+                _stop_workers(pool)
         # Tasks that were already running when the run stopped finished: hand them over.
         for i, fut in enumerate(futures):
             if i not in seen and fut.done() and not fut.cancelled() and fut.exception() is None:
                 on_result(i, fut.result())
         return problem
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """End the pool's workers now (their tasks are lost) and wait for the pool to close.
+    ``ProcessPoolExecutor`` has no public way to do this before Python 3.14."""
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        process.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _pool_failure(index: int, exc: BaseException) -> str:

@@ -70,6 +70,36 @@ def test_ctrl_c_in_the_driver_keeps_what_finished():
     assert got == {0: 0, 1: 1}
 
 
+def sleeps(seconds: float) -> float:
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+def test_ctrl_c_twice_drops_the_tasks_under_way_and_keeps_what_finished(capsys):
+    """The first Ctrl-C waits for the tasks under way and says so; a second one ends them at
+    once, and the results that came back before are still handed over."""
+    import os
+    import signal
+    import threading
+    import time
+
+    got: dict[int, float] = {}
+
+    def on_result(i, result):
+        got[i] = result
+        if len(got) == 1:
+            threading.Timer(2.0, os.kill, (os.getpid(), signal.SIGINT)).start()
+            raise KeyboardInterrupt
+        return True
+
+    start = time.monotonic()
+    assert LocalBackend(2).run(sleeps, [0.0, 300.0, 300.0, 300.0], on_result) == INTERRUPTED
+    assert got == {0: 0.0} and time.monotonic() - start < 120
+    assert "Ctrl-C again stops them now" in capsys.readouterr().err
+
+
 def one_thread(x: int) -> int:
     """A task that sets its own torch thread count, as the demonstration days do."""
     import torch
