@@ -84,6 +84,11 @@ class PretrainConfig:
     itself; play the result as ``prior[policy=<checkpoint>]`` (which reads this weight from
     it). 0: the actor alone. PPO does not train such an actor: every PPO iteration must be a
     critic warm-up."""
+    propose_with_prior: bool = True
+    """With ``rule_weight`` > 0 and the ``lookahead`` teacher: whether the actor proposes to
+    the teacher with the dispatcher as its prior (as it drives), or alone (``False``): then the
+    look-ahead judges every departure the actor would make without the rule, not only those it
+    is ``rule_weight`` nats surer of, and the labels show which of them pay."""
 
     @property
     def runs(self) -> bool:
@@ -303,6 +308,10 @@ class TrainConfig:
             (self.pretrain.rule_weight == 0 or self.iterations <= self.critic_warmup_iterations,
              "pretrain.rule_weight", "PPO does not train an actor with the dispatcher as its "
              "prior: set critic_warmup_iterations >= iterations (the actor frozen)"),
+            (self.pretrain.propose_with_prior
+             or (self.pretrain.rule_weight > 0 and self.pretrain.teacher == "lookahead"),
+             "pretrain.propose_with_prior", "false only with pretrain.rule_weight > 0 and "
+             "pretrain.teacher: lookahead (without a prior the actor proposes alone anyway)"),
             (self.evaluation.episodes >= 0, "evaluation.episodes", "must be >= 0"),
             (self.lost_vehicle_penalty >= 0, "lost_vehicle_penalty", "must be >= 0"),
             (self.device == "cpu" or self.device.startswith("cuda"), "device", "cpu or cuda[:N]"),

@@ -59,6 +59,9 @@ class DayTask:
     """The dispatcher as the learner's prior (``pretrain.rule_weight``): the learner drives,
     and proposes to a ``lookahead`` teacher, as ``prior[weight=rule_weight]``, and each decision
     keeps the dispatcher's choice (``rule``). 0: the learner alone, no ``rule`` kept."""
+    propose_with_prior: bool = True
+    """With ``rule_weight`` > 0: whether the learner proposes to the teacher with its prior
+    (``False``: the learner alone proposes, while it drives with the prior)."""
 
 
 class DemonstrationLog:
@@ -165,7 +168,8 @@ def label_day(task: DayTask) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError("a day without labels needs a learner to drive it")
     env = VertiportEnv(config=from_dict(task.env_config))
     teacher = (make_teacher(task.teacher, task.planner_horizon, task.planner_margin, task.seed,
-                            learner=task.learner, rule_weight=task.rule_weight,
+                            learner=task.learner,
+                            rule_weight=task.rule_weight if task.propose_with_prior else 0.0,
                             **task.planner_options)
                if task.labelled else None)
     # One dispatcher gives the day's rule: the choice logged and the learner's prior (it keeps
@@ -270,7 +274,8 @@ def round_tasks(cfg, env_config: dict[str, Any] | list[dict[str, Any]], round_: 
     options = {k: True for k in PLANNER_OPTIONS if getattr(pre, f"planner_{k}")}
     return [DayTask(conf, training_seed(base + d), steps, pre.teacher, pre.planner_horizon,
                     pre.planner_margin, options, learner, pre.noise if d >= pre.days else 0.0,
-                    labelled=not last, rule_weight=pre.rule_weight)
+                    labelled=not last, rule_weight=pre.rule_weight,
+                    propose_with_prior=pre.propose_with_prior)
             for d, (conf, steps) in enumerate(zip(configs, lengths))]
 
 

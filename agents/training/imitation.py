@@ -156,9 +156,10 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         return {}
     # What the saved progress must have been made with to be continued.
     # (Not the worker count: the data does not depend on it.)
-    # (Nor a rule weight of 0, the default: states saved before it existed go on.)
+    # (Nor options at the defaults they were added with: states saved before them go on.)
+    added = {"rule_weight": 0.0, "propose_with_prior": True}
     made_with = {"pretrain": {k: v for k, v in dataclasses.asdict(pre).items()
-                              if k != "workers" and (k != "rule_weight" or v)},
+                              if k != "workers" and (k not in added or v != added[k])},
                  "seed": cfg.seed, "env_config": env_config, "model": dataclasses.asdict(cfg.model),
                  "lost_vehicle_penalty": cfg.lost_vehicle_penalty,
                  **({"init_checkpoint": cfg.init_checkpoint} if cfg.init_checkpoint else {})}
@@ -193,6 +194,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                "demonstrations" if round_ == 0 else f"DAgger round {round_}")
         per_driver = len(tasks) // len(drivers)
         prior = (f" with the dispatcher as its prior (weight {pre.rule_weight:g})"
+                 + ("" if pre.propose_with_prior else ", proposing to the teacher alone")
                  if learner is not None and pre.rule_weight else "")
         log(f"{tag}: {pre.days} days and {per_driver - pre.days} day starts of {pre.start_steps} "
             f"steps ({0 if last else pre.low_battery_starts} with low batteries), "

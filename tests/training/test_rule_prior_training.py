@@ -13,6 +13,7 @@ from agents.controllers.gcn import GCNController, read_checkpoint
 from agents.controllers.prior import DEFAULT_WEIGHT, RulePriorController
 from agents.gcn.padding import to_padded_action
 from agents.training.config import TrainConfig, load_train_config
+from agents.training import demonstrations
 from agents.training.demonstrations import DayTask, label_day, pad_day, round_tasks
 from agents.training.imitation import fit_actor
 from agents.training.teachers import make_teacher
@@ -69,6 +70,25 @@ def test_the_teacher_and_the_rounds_get_the_weight():
     assert {t.rule_weight for t in tasks} == {2.0}
 
 
+def test_the_actor_may_propose_to_the_teacher_alone(monkeypatch):
+    learner = read_checkpoint(SHIPPED)
+    base = to_dict(load_train_config("expert_iteration_prior"))
+    cfg = build_dataclass(TrainConfig, {**base, "pretrain": {**base["pretrain"],
+                                                             "propose_with_prior": False}})
+    tasks = round_tasks(cfg, to_dict(load_config("paper")), 1, learner, last=False)
+    assert {(t.rule_weight, t.propose_with_prior) for t in tasks} == {(2.0, False)}
+    seen = []
+    real = demonstrations.make_teacher
+    monkeypatch.setattr(demonstrations, "make_teacher",
+                        lambda *a, **k: seen.append(k["rule_weight"]) or real(*a, **k))
+    env_cfg = to_dict(load_config("paper"))
+    for alone in (False, True):
+        data, _ = label_day(DayTask(env_cfg, 3, 40, "dispatcher", 4, learner=learner,
+                                    rule_weight=2.0, propose_with_prior=not alone))
+        assert "rule" in data  # the actor still drives and is fit with its prior
+    assert seen == [2.0, 0.0]
+
+
 def test_a_checkpoint_fit_with_the_prior_tells_prior_its_weight():
     content = read_checkpoint(SHIPPED)
     assert RulePriorController(policy=GCNController(content)).weight == DEFAULT_WEIGHT
@@ -84,6 +104,8 @@ def test_a_checkpoint_fit_with_the_prior_tells_prior_its_weight():
     ({"pretrain": {"days": 0}}, "needs pretrain.days"),
     ({"init_checkpoint": "", "ensemble": {"fits": 2}}, "needs pretrain.days .* ensemble.fits: 0"),
     ({"iterations": 3}, "PPO does not train an actor"),
+    ({"pretrain": {"rule_weight": 0.0, "propose_with_prior": False}}, "propose_with_prior: false"),
+    ({"pretrain": {"teacher": "dispatcher", "propose_with_prior": False}}, "teacher: lookahead"),
 ])
 def test_a_rule_weight_the_run_cannot_honour_is_refused(change, match):
     base = to_dict(load_train_config("expert_iteration_prior"))
