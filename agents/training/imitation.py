@@ -129,7 +129,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
                log: Callable[[str], None] = print,
                state_path: Path | None = None,
                on_round: Callable[[dict[str, float]], None] | None = None,
-               backend: Backend | None = None) -> dict[str, float]:
+               backend: Backend | None = None,
+               on_fit: Callable[[int, dict[str, Any]], None] | None = None) -> dict[str, float]:
     """Behaviour cloning then ``pretrain.dagger_rounds`` rounds of DAgger (see the module
     docstring); ``cfg`` is the :class:`~agents.training.config.TrainConfig`.
 
@@ -148,6 +149,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     interrupted. ``on_round(record)`` receives, per round, the mean metrics of its full days
     (:data:`ROUND_METRICS`), who drove, the demonstration steps so far and the fit's loss; the
     last round's record also names the round driven by the fit that is kept (``kept_round``).
+    ``on_fit(k, content)`` receives fit ``k``'s checkpoint content as soon as it is made (on
+    resume, the fits made before first), so a long loop can be played round by round.
 
     ``backend``: where the days run (default: ``pretrain.workers`` local processes); the
     result does not depend on it."""
@@ -181,6 +184,9 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
         for record in state["records"]:
             if on_round is not None:
                 on_round(record)
+        for k, fit in enumerate(state["fits"]):
+            if on_fit is not None:
+                on_fit(k, fit)
     stats, fits, scores = state["stats"], state["fits"], state["scores"]
     backend = backend or LocalBackend(pre.workers)
     where = backend.describe()
@@ -252,6 +258,8 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
             save_warm_start_state(state_path, state)
         if on_round is not None:
             on_round(record)
+        if on_fit is not None and not last:
+            on_fit(len(fits) - 1, fits[-1])
     paired = state.get("paired_scores")
     best = kept_fit(pre.keep, scores, paired)
     actor.load_state_dict(fits[best]["actor_state_dict"])

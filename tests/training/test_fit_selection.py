@@ -43,9 +43,25 @@ def test_paired_scores_are_every_fit_on_the_last_rounds_days(tmp_path):
     cfg = _config(days=2, day_steps=40, dagger_rounds=1)
     actor = small_actor()
     lines: list[str] = []
-    stats = warm_start(actor, cfg, env_cfg, log=lines.append, state_path=tmp_path / "state.pt")
+    events: list[str] = []
+    made: dict[int, dict] = {}
+
+    def on_fit(k, content):
+        events.append(f"fit {k}")
+        made[k] = content
+
+    stats = warm_start(actor, cfg, env_cfg, log=lines.append, state_path=tmp_path / "state.pt",
+                       on_round=lambda record: events.append("round"), on_fit=on_fit)
     assert any(line.startswith("scoring the 2 fits on the same days") for line in lines)
     fits = load_warm_start_state(tmp_path / "state.pt")["fits"]
+    # Each fit is handed over as soon as its round ends, before the next round's days.
+    assert events == ["round", "fit 0", "round", "fit 1", "round"]
+    for k, fit in enumerate(fits):
+        torch.testing.assert_close(made[k]["actor_state_dict"], fit["actor_state_dict"])
+    events.clear()  # a resumed (here finished) warm start hands over the fits made before
+    warm_start(small_actor(), cfg, env_cfg, log=lambda *_: None, state_path=tmp_path / "state.pt",
+               on_round=lambda record: events.append("round"), on_fit=on_fit)
+    assert events == ["round"] * 3 + ["fit 0", "fit 1"]
     # Each fit drives the last round's days by itself: its paired score is their mean score.
     for k, fit in enumerate(fits):
         days = [label_day(t)[1] for t in round_tasks(cfg, env_cfg, 2, fit, last=True)]
