@@ -123,21 +123,20 @@ def warm_start_stage(runner, cfg: TrainConfig, env_cfg, run_dir: Path, resume: b
         if rank == 0:
             write_curves(run_dir / "warmstart.csv", warm_rows, WARM_CURVE_KEYS)
 
-    def on_fit(k: int, content: dict) -> None:  # each round's fit as made, to play it paired
-        if rank == 0 and cfg.pretrain.dagger_rounds:
-            write_torch_atomic(run_dir / f"model_fit{k}.pt", content)
+    def write_fit(k: int, content: dict) -> None:  # each round's fit as made, to play it paired
+        write_torch_atomic(run_dir / f"model_fit{k}.pt", content)
 
     warm_envs = ([to_dict(c) for c in scenario_configs(cfg)] if cfg.scenarios
                  else to_dict(env_cfg))
     stats = warm_start(runner.alg.actor, cfg, warm_envs, log=log,
-                       state_path=state_path, on_round=on_round, backend=backend, on_fit=on_fit)
+                       state_path=state_path, on_round=on_round, backend=backend,
+                       on_fit=write_fit if rank == 0 and cfg.pretrain.dagger_rounds else None)
     if not stats:
         return warm_rows
     runner.save(str(run_dir / "model_warmstart.pt"), {"warm_start": stats})
-    saved = load_warm_start_state(state_path) if cfg.ensemble.fits else None
     if cfg.ensemble.fits:
         ens_stats, refits = distil_ensemble(
-            runner.alg.actor, cfg, warm_envs, saved["data"],
+            runner.alg.actor, cfg, warm_envs, load_warm_start_state(state_path)["data"],
             padded_sizes(warm_envs), log=log, backend=backend)
         if rank == 0:
             for k, content in enumerate(refits, start=1):

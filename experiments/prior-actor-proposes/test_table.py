@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from agents.evaluate.stats import bootstrap_ci
+from agents.evaluate.unforced import unforced_losses
 
 HERE = Path(__file__).parent
 #: The dispatcher's test-day rows are rule-prior's (the same days, played the same way).
@@ -33,18 +34,19 @@ def main() -> None:
     agents = [BASE] + sorted(a for a in pd.read_csv(FILES[1]).agent.unique())
     by = {a: days[days.agent == a].set_index(["config", "seed"]).sort_index() for a in agents}
     base = by[BASE]
+    episodes = {a: rows.to_dict("index") for a, rows in by.items()}  # {(case, seed): metrics}
     print("| controller | case | reward a day | − dispatcher [95 % CI] | lost a day | unforced a day "
           "| contacts | separation losses (least, m) | delay (min) | trips a day |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for agent in agents:
         rows = by[agent]
         for case in (*CASES, "all"):
-            mine = rows if case == "all" else rows.loc[case]
-            ref = base if case == "all" else base.loc[case]
-            ref = ref.loc[mine.index]
+            mine = rows if case == "all" else rows.loc[[case]]  # indexed by (case, seed)
+            ref = base.loc[mine.index]
             gain = "" if agent == BASE else _gain(mine.total_reward - ref.total_reward,
                                                    ref.total_reward.mean())
-            unforced = "" if agent == BASE else f"{(mine.lost - ref.lost).clip(lower=0).mean():.3f}"
+            unforced = "" if agent == BASE else "{:.3f}".format(pd.Series(
+                [unforced_losses(episodes, agent, day, [BASE]) for day in mine.index]).mean())
             print(f"| {agent} | {CASES.get(case, 'all')} ({len(mine)}) | {mine.total_reward.mean():.0f} "
                   f"| {gain} | {mine.lost.mean():.3f} | {unforced} | {int(mine.contacts.sum())} "
                   f"| {int(mine.separation_losses.sum())} ({mine.min_separation_m.min():.2f}) "

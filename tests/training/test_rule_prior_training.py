@@ -12,8 +12,8 @@ from helpers import small_actor
 from agents.controllers.gcn import GCNController, read_checkpoint
 from agents.controllers.prior import DEFAULT_WEIGHT, RulePriorController
 from agents.gcn.padding import to_padded_action
-from agents.training.config import TrainConfig, load_train_config
 from agents.training import demonstrations
+from agents.training.config import TrainConfig, load_train_config
 from agents.training.demonstrations import DayTask, label_day, pad_day, round_tasks
 from agents.training.imitation import fit_actor
 from agents.training.teachers import make_teacher
