@@ -172,11 +172,7 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     state: dict[str, Any] = {"next_round": 0, "data": None, "fits": [], "scores": [], "stats": {},
                              "records": [], "env_steps": 0, "made_with": made_with}
     if state_path is not None and state_path.exists():
-        state = load_warm_start_state(state_path)
-        if state["made_with"] != made_with:
-            raise ValueError(f"{state_path}: the warm start saved there was made with another "
-                             f"configuration (pretrain, seed, env or model); delete it to redo "
-                             f"the warm start, or resume with the configuration it was made with")
+        state = _continued(load_warm_start_state(state_path), made_with, state_path, log)
         log(f"warm start: resuming after round {state['next_round'] - 1} from {state_path.name}")
         torch.set_rng_state(state["torch_rng"])
         if state["fits"]:
@@ -269,6 +265,40 @@ def warm_start(actor, cfg, env_config: dict[str, Any] | list[dict[str, Any]],
     log(f"warm start: keeping fit {best} of {len(fits)} ({pre.keep}: score "
         f"{(paired if pre.keep == 'paired' else scores)[best]:.0f})")
     return stats
+
+
+def _continued(state: dict[str, Any], made_with: dict[str, Any], path: Path,
+               log: Callable[[str], None]) -> dict[str, Any]:
+    """The saved progress ``state``, checked against this run's ``made_with``. Progress saved
+    with fewer ``dagger_rounds`` and otherwise the same configuration goes on to more rounds: the
+    round that only scored the last fit, if it ran, is dropped and replaced by a DAgger round,
+    so the result is that of a run made with the new count from the start. Anything else that
+    differs raises ``ValueError`` naming ``path``."""
+    saved = state["made_with"]
+    if saved == made_with:
+        return state
+    before = saved.get("pretrain", {}).get("dagger_rounds")
+    rounds = made_with["pretrain"]["dagger_rounds"]
+    if {**saved, "pretrain": {**saved.get("pretrain", {}), "dagger_rounds": rounds}} != made_with:
+        raise ValueError(f"{path}: the warm start saved there was made with another "
+                         f"configuration (pretrain, seed, env or model); delete it to redo "
+                         f"the warm start, or resume with the configuration it was made with")
+    if rounds < before:
+        raise ValueError(f"{path}: the warm start saved there has {before} DAgger rounds; it can "
+                         f"go on to more rounds, not fewer (pretrain.dagger_rounds: {rounds})")
+    if state["next_round"] == before + 2:  # the scoring round ran: a DAgger round takes its place
+        state["records"].pop()
+        state["scores"].pop()
+        state.pop("paired_scores", None)
+        state["env_steps"] = int(state["records"][-1]["env_steps"])
+        state["next_round"] = before + 1
+    log(f"warm start: going on from {before} to {rounds} DAgger rounds")
+    return {**state, "made_with": made_with}
+
+
+def saved_dagger_rounds(path: Path) -> int:
+    """The ``pretrain.dagger_rounds`` the warm-start progress at ``path`` was made with."""
+    return int(load_warm_start_state(path)["made_with"]["pretrain"]["dagger_rounds"])
 
 
 def save_warm_start_state(path: Path, state: dict[str, Any]) -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import time
 from pathlib import Path
 from typing import Callable
@@ -31,7 +32,8 @@ from agents.training.checkpoints import WARM_STATE, checkpoint_infos, latest_che
 from agents.training.config import TrainConfig, scenario_configs
 from agents.training.curves import WARM_CURVE_KEYS, plot_curves, read_curves, write_curves
 from agents.training.ensemble import distil_ensemble
-from agents.training.imitation import load_warm_start_state, padded_sizes, warm_start
+from agents.training.imitation import (load_warm_start_state, padded_sizes,
+                                       saved_dagger_rounds, warm_start)
 from agents.training.log_writer import CALLBACK_KEY
 from agents.training.runner import load_checkpoint_into, make_runner_class, make_vec_env, runner_config
 from marl_vertiport.config import ConfigError, build_dataclass, load_config, to_dict, with_rules
@@ -69,6 +71,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, evaluate: bool 
     runner = make_runner_class()(vec_env, runner_config(cfg), log_dir=str(run_dir),
                                  device=cfg.device)
     runner.checkpoint_infos = checkpoint_infos(cfg, env_cfg)
+    if resume:
+        set_aside_for_more_rounds(run_dir, cfg, log)
     curves = read_curves(run_dir / "curves.csv") if resume else []
     warm_rows = read_curves(run_dir / "warmstart.csv") if resume else []
     ckpt = latest_checkpoint(run_dir) if resume else None
@@ -144,6 +148,31 @@ def warm_start_stage(runner, cfg: TrainConfig, env_cfg, run_dir: Path, resume: b
         runner.save(str(run_dir / "model_distilled.pt"), {"warm_start": {**stats, **ens_stats}})
     sharpen_start(runner, cfg, log)
     return warm_rows
+
+
+def set_aside_for_more_rounds(run_dir: Path, cfg: TrainConfig, log: Log) -> None:
+    """Where ``cfg`` asks for more DAgger rounds than the run's warm start was saved with, the
+    warm start goes on and PPO starts again from its new result: what PPO and the evaluation
+    made from the old one (``model_<it>.pt``, ``curves.csv``, ``eval/``) is moved, not
+    deleted, into ``run_dir/after_<k>_rounds/``."""
+    state_path = run_dir / WARM_STATE
+    if not state_path.exists() or not cfg.pretrain.runs:
+        return
+    before = saved_dagger_rounds(state_path)
+    if before >= cfg.pretrain.dagger_rounds:
+        return
+    made = [p for p in run_dir.glob("model_*.pt") if re.fullmatch(r"model_\d+\.pt", p.name)]
+    made += [p for p in (run_dir / "curves.csv", run_dir / "eval") if p.exists()]
+    if not made:
+        return
+    aside = run_dir / f"after_{before}_rounds"
+    if aside.exists():
+        raise FileExistsError(f"{aside}: already there; move it away to go on to "
+                              f"{cfg.pretrain.dagger_rounds} DAgger rounds")
+    aside.mkdir()
+    for path in made:
+        path.rename(aside / path.name)
+    log(f"PPO's outputs from the {before}-round warm start moved to {aside}")
 
 
 def sharpen_start(runner, cfg: TrainConfig, log: Log) -> None:

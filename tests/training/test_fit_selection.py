@@ -80,3 +80,35 @@ def test_paired_keep_without_dagger_keeps_behaviour_cloning():
     stats = warm_start(small_actor(), cfg, to_dict(load_config("paper")), log=lambda *_: None)
     assert stats["chosen_fit"] == 0
     assert stats["fit_0_paired_score"] == pytest.approx(stats["fit_0_score"])
+
+
+def test_a_finished_warm_start_goes_on_to_more_rounds_as_if_made_so(tmp_path):
+    """Progress saved with one DAgger round, resumed with two: the scoring round is replaced by
+    the second DAgger round, and fits, scores, records and the kept fit are a two-round run's."""
+    env_cfg = to_dict(load_config("paper"))
+    one, two = _config(days=1, day_steps=30, dagger_rounds=1), _config(days=1, day_steps=30,
+                                                                       dagger_rounds=2)
+    results = {}
+    for name, steps in (("straight", [two]), ("extended", [one, two])):
+        records = []
+        for cfg in steps:
+            torch.manual_seed(0)
+            records.clear()
+            lines: list[str] = []
+            stats = warm_start(small_actor(), cfg, env_cfg, log=lines.append,
+                               state_path=tmp_path / f"{name}.pt", on_round=records.append)
+        results[name] = stats, list(records), load_warm_start_state(tmp_path / f"{name}.pt"), lines
+    (stats, records, state, _), (ext_stats, ext_records, ext_state, lines) = results.values()
+    assert "warm start: going on from 1 to 2 DAgger rounds" in lines
+    assert stats == ext_stats and records == ext_records and len(ext_state["fits"]) == 3
+    assert state["env_steps"] == ext_state["env_steps"] and state["scores"] == ext_state["scores"]
+    for fit, ext_fit in zip(state["fits"], ext_state["fits"]):
+        for key, value in fit["actor_state_dict"].items():
+            assert torch.equal(value, ext_fit["actor_state_dict"][key]), key
+    # Fewer rounds than saved, or any other change, is refused.
+    with pytest.raises(ValueError, match="not fewer"):
+        warm_start(small_actor(), one, env_cfg, log=lambda *_: None,
+                   state_path=tmp_path / "straight.pt")
+    with pytest.raises(ValueError, match="another configuration"):
+        warm_start(small_actor(), _config(days=2, day_steps=30, dagger_rounds=3), env_cfg,
+                   log=lambda *_: None, state_path=tmp_path / "straight.pt")

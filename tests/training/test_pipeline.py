@@ -359,3 +359,42 @@ def test_a_warm_start_goes_on_from_the_init_checkpoint(tmp_path):
     lines.clear()
     train(cold, tmp_path / "cold", log=lines.append, evaluate=False)
     assert "the dispatcher drives" in "\n".join(lines)
+
+
+def test_resume_with_more_rounds_goes_on_from_the_saved_warm_start(tmp_path, capsys):
+    """``train --resume RUN --rounds N``: a finished run's warm start goes on to N DAgger rounds
+    and ends as a run made with N; PPO's old outputs are moved aside, not lost."""
+    import yaml
+
+    from agents.training.cli import main
+    from agents.training.config import load_train_config
+
+    cfg = tiny_config("single_agent", iterations=1,
+                      pretrain={"days": 1, "day_steps": 24, "teacher": "dispatcher",
+                                "workers": 1, "epochs": 1, "batch_size": 64,
+                                "learning_rate": 1e-3, "dagger_rounds": 0})
+    path = tmp_path / "zero.yaml"
+    path.write_text(yaml.safe_dump(to_dict(cfg)))
+    run = tmp_path / "run"
+    assert main(["--config", str(path), "--run-dir", str(run), "--no-eval"]) == 0
+    old_ppo = (run / "model_0.pt").read_bytes()
+    assert main(["--resume", str(run), "--rounds", "1", "--no-eval"]) == 0
+    assert (run / "after_0_rounds" / "model_0.pt").read_bytes() == old_ppo
+    assert (run / "after_0_rounds" / "curves.csv").exists() and (run / "model_fit1.pt").exists()
+    assert load_train_config(run / "train_config.yaml").pretrain.dagger_rounds == 1
+    assert [r["round"] for r in read_curves(run / "warmstart.csv")] == [0.0, 1.0, 2.0]
+    straight = build_dataclass(TrainConfig, {**to_dict(cfg), "pretrain": {
+        **to_dict(cfg.pretrain), "dagger_rounds": 1}})
+    train(straight, tmp_path / "straight", log=lambda *_: None, evaluate=False)
+    for name in ("model_warmstart.pt", "model_0.pt"):
+        made = torch.load(run / name, weights_only=True)["actor_state_dict"]
+        for key, value in torch.load(tmp_path / "straight" / name,
+                                     weights_only=True)["actor_state_dict"].items():
+            assert torch.equal(value, made[key]), (name, key)
+    capsys.readouterr()
+    # Not more rounds than it has, or not with a new run: refused before anything is touched.
+    assert main(["--resume", str(run), "--rounds", "1", "--no-eval"]) == 2
+    assert main(["--config", str(path), "--rounds", "2", "--no-eval"]) == 2
+    err = capsys.readouterr().err
+    assert "it can only go on to more" in err and "only with --resume" in err
+    assert load_train_config(run / "train_config.yaml").pretrain.dagger_rounds == 1
