@@ -6,8 +6,12 @@ least separation, mean delay and completed trips; and all days together.
 Run from the repository root (prints Markdown)::
 
     python experiments/prior-actor-proposes/test_table.py
+    python experiments/prior-actor-proposes/test_table.py zero_shot.csv   # or noise.csv
+
+With a file of this folder named, its own days are tabled (the dispatcher's rows among them).
 """
 
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -29,9 +33,10 @@ def _gain(diff: pd.Series, mean_base: float) -> str:
 
 
 def main() -> None:
-    days = pd.concat([pd.read_csv(f) for f in FILES])
+    files = [HERE / sys.argv[1]] if len(sys.argv) > 1 else FILES
+    days = pd.concat([pd.read_csv(f) for f in files])
     days["lost"] = days.stranded_air + days.stranded_ground
-    agents = [BASE] + sorted(a for a in pd.read_csv(FILES[1]).agent.unique())
+    agents = [BASE] + sorted(a for a in pd.read_csv(files[-1]).agent.unique() if a != BASE)
     by = {a: days[days.agent == a].set_index(["config", "seed"]).sort_index() for a in agents}
     base = by[BASE]
     episodes = {a: rows.to_dict("index") for a, rows in by.items()}  # {(case, seed): metrics}
@@ -40,14 +45,15 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for agent in agents:
         rows = by[agent]
-        for case in (*CASES, "all"):
+        cases = [c for c in CASES if c in rows.index] or list(rows.index.unique(0))
+        for case in (*cases, "all") if len(cases) > 1 else cases:
             mine = rows if case == "all" else rows.loc[[case]]  # indexed by (case, seed)
             ref = base.loc[mine.index]
             gain = "" if agent == BASE else _gain(mine.total_reward - ref.total_reward,
                                                    ref.total_reward.mean())
             unforced = "" if agent == BASE else "{:.3f}".format(pd.Series(
                 [unforced_losses(episodes, agent, day, [BASE]) for day in mine.index]).mean())
-            print(f"| {agent} | {CASES.get(case, 'all')} ({len(mine)}) | {mine.total_reward.mean():.0f} "
+            print(f"| {agent} | {CASES.get(case, case)} ({len(mine)}) | {mine.total_reward.mean():.0f} "
                   f"| {gain} | {mine.lost.mean():.3f} | {unforced} | {int(mine.contacts.sum())} "
                   f"| {int(mine.separation_losses.sum())} ({mine.min_separation_m.min():.2f}) "
                   f"| {mine.mean_delay_min.mean():.0f} | {mine.completed_trips.mean():.1f} |")
