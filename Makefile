@@ -73,8 +73,8 @@ fuzz: $(STAMP)  ## the property-based tests on many more examples (HYPOTHESIS_PR
 # CONFIG names an env config elsewhere; for `train` it names a train config when given.
 TRAIN_CONFIG = $(if $(filter command line,$(origin CONFIG)),$(CONFIG),default)
 
-train: $(STAMP)  ## train the GCN policy (CONFIG=default|scratch|expert_iteration|expert_iteration_prior|path, RESUME=runs/train/<run>, WORKERS=1 for one process; 13 minutes on an idle 2-core AMD EPYC without AVX-512, docs/training.md)
-	$(CLI) train $(if $(RESUME),--resume $(RESUME),--config $(TRAIN_CONFIG)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
+train: $(STAMP)  ## train the GCN policy (CONFIG=default|scratch|expert_iteration|expert_iteration_prior|path, RESUME=runs/train/<run>, with ROUNDS=N its warm start taken on to N DAgger rounds, WORKERS=1 for one process; 13 minutes on an idle 2-core AMD EPYC without AVX-512, docs/training.md)
+	$(CLI) train $(if $(RESUME),--resume $(RESUME) $(if $(ROUNDS),--rounds $(ROUNDS)),--config $(TRAIN_CONFIG)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
 
 check-train: $(STAMP)  ## train as make train does (or CHECKPOINT=path), then pair it with the shipped checkpoint on 200 validation days: M, every safety metric and a verdict (training as long as make train, then the 400 days)
 	$(CLI) check-train $(if $(CHECKPOINT),--checkpoint $(CHECKPOINT)) $(if $(WORKERS),--workers $(WORKERS)) $(RUN_ON)
