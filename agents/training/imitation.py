@@ -279,7 +279,8 @@ def _continued(state: dict[str, Any], made_with: dict[str, Any], path: Path,
         return state
     before = saved.get("pretrain", {}).get("dagger_rounds")
     rounds = made_with["pretrain"]["dagger_rounds"]
-    if {**saved, "pretrain": {**saved.get("pretrain", {}), "dagger_rounds": rounds}} != made_with:
+    if (not isinstance(before, int)
+            or {**saved, "pretrain": {**saved["pretrain"], "dagger_rounds": rounds}} != made_with):
         raise ValueError(f"{path}: the warm start saved there was made with another "
                          f"configuration (pretrain, seed, env or model); delete it to redo "
                          f"the warm start, or resume with the configuration it was made with")
