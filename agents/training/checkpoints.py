@@ -27,14 +27,21 @@ def checkpoint_infos(cfg: TrainConfig, env_cfg) -> dict[str, Any]:
                                "feature_schema": feature_names("observation")}}
 
 
-def latest_checkpoint(run_dir: Path) -> Path | None:
-    """The complete checkpoint with the highest iteration in a run folder (temp files ignored)."""
+def ppo_checkpoints(run_dir: Path) -> list[Path]:
+    """The complete PPO checkpoints ``model_<iteration>.pt`` of a run folder, by iteration (temp
+    files and the warm start's ``model_warmstart.pt``, ``model_fit<k>.pt`` ignored)."""
     found = []
     for path in run_dir.glob("model_*.pt"):
         m = re.fullmatch(r"model_(\d+)\.pt", path.name)
         if m:
             found.append((int(m.group(1)), path))
-    return max(found)[1] if found else None
+    return [path for _, path in sorted(found)]
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    """The complete checkpoint with the highest iteration in a run folder (temp files ignored)."""
+    found = ppo_checkpoints(run_dir)
+    return found[-1] if found else None
 
 
 #: What a shipped checkpoint keeps of a run's: the weights, the iteration and the metadata.

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import re
 import time
 from pathlib import Path
 from typing import Callable
@@ -28,7 +27,8 @@ from agents.common.files import write_atomic, write_torch_atomic
 from agents.common.seeds import VALIDATION_SEED_BASE
 from agents.execution import Backend
 from agents.training.callbacks import RunProgress
-from agents.training.checkpoints import WARM_STATE, checkpoint_infos, latest_checkpoint
+from agents.training.checkpoints import (WARM_STATE, checkpoint_infos, latest_checkpoint,
+                                         ppo_checkpoints)
 from agents.training.config import TrainConfig, scenario_configs
 from agents.training.curves import WARM_CURVE_KEYS, plot_curves, read_curves, write_curves
 from agents.training.ensemble import distil_ensemble
@@ -161,8 +161,8 @@ def set_aside_for_more_rounds(run_dir: Path, cfg: TrainConfig, log: Log) -> None
     before = saved_dagger_rounds(state_path)
     if before >= cfg.pretrain.dagger_rounds:
         return
-    made = [p for p in run_dir.glob("model_*.pt") if re.fullmatch(r"model_\d+\.pt", p.name)]
-    made += [p for p in (run_dir / "curves.csv", run_dir / "eval") if p.exists()]
+    made = ppo_checkpoints(run_dir) + [p for p in (run_dir / "curves.csv", run_dir / "eval")
+                                       if p.exists()]
     if not made:
         return
     aside = run_dir / f"after_{before}_rounds"
